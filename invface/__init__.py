@@ -1,0 +1,2 @@
+from ._env import configure_llvm as _c
+_c()

@@ -1,0 +1,126 @@
+"""Vectorised tetrahedral-mesh geometry: volumes, quality, boundary, embedding, Laplacian.
+
+Conventions: ``X`` (N,3) float64 vertex positions in metres, ``tets`` (T,4) int vertex ids,
+positively oriented when det[x1-x0, x2-x0, x3-x0] > 0.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+# The face opposite vertex k, ordered so its normal points out of a positive tet.
+_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+
+
+def signed_volumes(X, tets):
+    """Signed volumes (T,) in m^3."""
+    p = X[tets]
+    return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
+
+
+def dihedral_angles(X, tets):
+    """The six interior dihedral angles (T,6) in radians of each tet."""
+    p = X[tets]
+    n = []
+    for f in _FACES:
+        a, b, c = p[:, f[0]], p[:, f[1]], p[:, f[2]]
+        nn = np.cross(b - a, c - a)
+        n.append(nn / np.maximum(np.linalg.norm(nn, axis=1, keepdims=True), 1e-300))
+    out = []
+    for k in range(4):
+        for m in range(k + 1, 4):
+            cosang = np.clip(-np.einsum("ij,ij->i", n[k], n[m]), -1, 1)
+            out.append(np.arccos(cosang))
+    return np.stack(out, 1)
+
+
+def radius_ratio(X, tets):
+    """Normalised radius ratio 3 r_in / r_circ (T,): 1 for a regular tet, 0 when degenerate."""
+    p = X[tets]
+    d1, d2, d3 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]
+    vol6 = np.einsum("ij,ij->i", np.cross(d1, d2), d3)
+    area = 0.0
+    for f in _FACES:
+        area = area + 0.5 * np.linalg.norm(np.cross(p[:, f[1]] - p[:, f[0]], p[:, f[2]] - p[:, f[0]]), axis=1)
+    r_in = 0.5 * np.abs(vol6) / np.maximum(area, 1e-300)
+    num = (np.sum(d1 * d1, 1)[:, None] * np.cross(d2, d3) + np.sum(d2 * d2, 1)[:, None] * np.cross(d3, d1)
+           + np.sum(d3 * d3, 1)[:, None] * np.cross(d1, d2))
+    r_c = np.linalg.norm(num, axis=1) / np.maximum(np.abs(2 * vol6), 1e-300)
+    return 3.0 * r_in / np.maximum(r_c, 1e-300)
+
+
+def quality_summary(X, tets):
+    """Dict of mesh quality figures: counts, volume range, min dihedral (deg), radius ratio."""
+    vol = signed_volumes(X, tets)
+    dih = np.degrees(dihedral_angles(X, tets))
+    rr = radius_ratio(X, tets)
+    return {
+        "tets": int(len(tets)),
+        "vertices": int(len(X)),
+        "volume_m3": float(vol.sum()),
+        "min_volume_m3": float(vol.min()),
+        "inverted": int((vol <= 0).sum()),
+        "min_dihedral_deg": float(dih.min()),
+        "max_dihedral_deg": float(dih.max()),
+        "min_radius_ratio": float(rr.min()),
+        "mean_radius_ratio": float(rr.mean()),
+    }
+
+
+def boundary_faces(tets):
+    """Outward-oriented triangles (B,3) that belong to exactly one tet, and their tet ids (B,)."""
+    faces = tets[:, _FACES].reshape(-1, 3)
+    owner = np.repeat(np.arange(len(tets)), 4)
+    key = np.sort(faces, axis=1)
+    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    once = counts[inv.ravel()] == 1
+    return faces[once], owner[once]
+
+
+def barycentric(X, tets, tet_ids, points):
+    """Barycentric coordinates (P,4) of ``points`` (P,3) in tets ``tet_ids`` (P,)."""
+    p = X[tets[tet_ids]]
+    D = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], axis=2)
+    lam = np.linalg.solve(D, (points - p[:, 0])[..., None])[..., 0]
+    return np.concatenate([1 - lam.sum(1, keepdims=True), lam], axis=1)
+
+
+def shape_gradients(X, tets):
+    """Gradients of the 4 linear shape functions per tet (T,4,3) and rest volumes (T,)."""
+    p = X[tets]
+    Dm = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], axis=2)
+    Dinv = np.linalg.inv(Dm)                      # rows: grad of lambda_1..3
+    g = np.concatenate([-Dinv.sum(1, keepdims=True), Dinv], axis=1)
+    return g, np.linalg.det(Dm) / 6.0
+
+
+def laplacian(X, tets):
+    """Cotangent (linear FEM) stiffness Laplacian L (N,N), symmetric positive semidefinite.
+
+    L = sum_t V_t G_t^T G_t, the discrete -div grad; L @ u = 0 is the harmonic condition.
+    """
+    g, vol = shape_gradients(X, tets)
+    K = np.einsum("t,tai,tbi->tab", np.abs(vol), g, g)
+    rows = np.repeat(tets, 4, axis=1).ravel()
+    cols = np.tile(tets, (1, 4)).ravel()
+    n = len(X)
+    return sp.csr_matrix((K.ravel(), (rows, cols)), shape=(n, n))
+
+
+def harmonic(L, fixed, values):
+    """Solve L u = 0 with u[fixed] = values (Dirichlet), natural (Neumann) elsewhere.
+
+    L: (N,N) sparse; fixed: (C,) ids; values: (C,) or (C,k). Returns u (N,) or (N,k).
+    """
+    from scipy.sparse.linalg import splu
+
+    n = L.shape[0]
+    free = np.setdiff1d(np.arange(n), fixed)
+    values = np.asarray(values, float)
+    u = np.zeros((n,) + values.shape[1:])
+    u[fixed] = values
+    A = L[free][:, free].tocsc()
+    rhs = -(L[free][:, fixed] @ values)
+    sol = splu(A).solve(np.asarray(rhs).reshape(len(free), -1))
+    u[free] = sol.reshape((len(free),) + values.shape[1:])
+    return u

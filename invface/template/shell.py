@@ -1,0 +1,78 @@
+"""Layered-shell tetrahedral flesh between the template's skin and bone.
+
+Every coarse skin triangle is extruded along its vertices' rays down to the bone in ``L``
+layers; each prism is split into 3 tets by the global vertex-order rule (each quad side is
+cut by the diagonal from its lowest-numbered vertex), which makes neighbouring prisms
+conforming. The result is deterministic, keeps the coarse skin exactly and takes
+milliseconds. Vertex id = layer * Ns + skin vertex id (layer 0 = skin, layer L = inner).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..mesh.tets import barycentric, signed_volumes
+
+
+def layer_radii(r_skin, r_inner, n_layers):
+    """(L+1, ...) radii from skin (layer 0) to the inner surface (layer L), uniform in depth."""
+    t = np.linspace(0.0, 1.0, n_layers + 1).reshape((-1,) + (1,) * np.ndim(r_skin))
+    return r_skin[None] * (1 - t) + r_inner[None] * t
+
+
+def prism_tets(triangles, n_skin, n_layers):
+    """Tets (3*F*L, 4) of the extruded triangles, positively oriented later by the caller."""
+    tri = np.sort(triangles, axis=1)   # the vertex-order rule needs a < b < c
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    out = []
+    for k in range(n_layers):
+        o, o2 = k * n_skin, (k + 1) * n_skin
+        out += [np.stack([a + o, b + o, c + o, c + o2], 1),
+                np.stack([a + o, b + o, b + o2, c + o2], 1),
+                np.stack([a + o, a + o2, b + o2, c + o2], 1)]
+    return np.concatenate(out)
+
+
+def orient(X, tets):
+    """Swap two vertices of every negatively oriented tet so all volumes are positive."""
+    tets = tets.copy()
+    neg = signed_volumes(X, tets) < 0
+    tets[neg, 2], tets[neg, 3] = tets[neg, 3].copy(), tets[neg, 2].copy()
+    return tets
+
+
+def embed_fine(coarse, fine, factor, X, tets, n_layers):
+    """Barycentric embedding of the fine skin's vertices in the top layer of tets.
+
+    Returns (tet id (Vf,), weights (Vf,4)). Fine vertex (I, J) lies in coarse cell
+    (I // f, J // f); its duplicates on a slit use the cell below the slit.
+    """
+    ni, nj = coarse.shape
+    fg = fine.vertex_grid()
+    Vf = fine.positions()
+    ci = np.minimum(fg[:, 0] // factor, ni - 2)
+    cj = np.minimum(fg[:, 1] // factor, nj - 2)
+    n_grid_f = fine.shape[0] * fine.shape[1]
+    is_dup = np.arange(len(fg)) >= n_grid_f
+    cj = np.where(is_dup, fg[:, 1] // factor - 1, cj)
+    # candidate tets: the 2 triangles of the cell x 3 tets of the top layer
+    n_tri = len(coarse.triangles)
+    key = coarse.tri_cells[:, 0] * nj + coarse.tri_cells[:, 1]
+    order = np.argsort(key, kind="stable")
+    first = np.searchsorted(key[order], ci * nj + cj)
+    cand = []
+    for t in range(2):
+        tri_id = order[np.minimum(first + t, n_tri - 1)]
+        for m in range(3):
+            cand.append(m * n_tri + tri_id)    # tet id layout of prism_tets, layer 0
+    cand = np.stack(cand, 1)
+    best_w = None
+    best_t = None
+    best_score = np.full(len(fg), -np.inf)
+    for c in range(cand.shape[1]):
+        w = barycentric(X, tets, cand[:, c], Vf)
+        score = w.min(1)
+        better = score > best_score
+        best_score = np.where(better, score, best_score)
+        best_t = np.where(better, cand[:, c], best_t if best_t is not None else cand[:, c])
+        best_w = np.where(better[:, None], w, best_w if best_w is not None else w)
+    return best_t.astype(np.int64), best_w

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Idempotent set-up for a fresh Debian machine: the system LLVM that Dr.Jit's CPU backend
+# loads (mitsuba 3.9 / drjit 1.5 abort on LLVM 15/16; LLVM 19 works), then invface itself.
+# Usage: scripts/install.sh [extra]   (extra = "test" installs the test dependencies too)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+extra="${1:-}"
+stamp=".install-stamp${extra:+-$extra}"
+
+if ! ls /usr/lib/x86_64-linux-gnu/libLLVM.so.19* /usr/lib/*/libLLVM-19.so >/dev/null 2>&1; then
+    if command -v apt-get >/dev/null 2>&1; then
+        SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
+        echo "invface install: installing libllvm19 (Dr.Jit CPU backend) with apt-get"
+        $SUDO apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libllvm19 >/dev/null
+    else
+        echo "invface install: no apt-get; install LLVM 19 and set DRJIT_LIBLLVM_PATH yourself" >&2
+    fi
+fi
+
+# Re-install only when pyproject.toml changed since the last successful install.
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || ! python3 -c "import invface" 2>/dev/null; then
+    spec="."; [ -n "$extra" ] && spec=".[$extra]"
+    python3 -m pip install -q --disable-pip-version-check -e "$spec"
+    touch "$stamp"
+fi
