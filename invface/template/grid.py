@@ -46,15 +46,14 @@ def raycast(field, alpha, beta, r_lo=0.005, r_hi=0.32, iters=40):
 
 
 def point_at(field, x, y, iters=6):
-    """Skin point (3,) seen from the front at lateral x and height y (metres)."""
-    z = 0.1
+    """Skin points (..., 3) seen from the front at lateral x and height y (..., ) metres."""
+    x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
+    z = np.full(x.shape, 0.1)
     for _ in range(iters):
-        d = np.array([x, y, z]) - CENTER
-        d /= np.linalg.norm(d)
-        a, b = angles(d)
-        r = raycast(field, np.array(a), np.array(b))
-        p = CENTER + r * directions(a, b)
-        z = p[2]
+        d = np.stack([x, y, z], -1) - CENTER
+        a, b = angles(d / np.linalg.norm(d, axis=-1, keepdims=True))
+        p = CENTER + raycast(field, a, b)[..., None] * directions(a, b)
+        z = p[..., 2]
     return p
 
 

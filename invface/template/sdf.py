@@ -21,9 +21,14 @@ def smax(a, b, k):
 
 def ellipsoid(p, c, r):
     """Approximate SDF of an axis-aligned ellipsoid, centre ``c`` (3,), radii ``r`` (3,)."""
-    q = (p - np.asarray(c)) / np.asarray(r)
-    k0 = np.linalg.norm(q, axis=-1)
-    k1 = np.linalg.norm(q / np.asarray(r), axis=-1)
+    x = (p[..., 0] - c[0]) / r[0]
+    y = (p[..., 1] - c[1]) / r[1]
+    z = (p[..., 2] - c[2]) / r[2]
+    k0 = np.sqrt(x * x + y * y + z * z)
+    x /= r[0]
+    y /= r[1]
+    z /= r[2]
+    k1 = np.sqrt(x * x + y * y + z * z)
     return k0 * (k0 - 1.0) / np.maximum(k1, 1e-12)
 
 
@@ -34,12 +39,11 @@ def round_cone(p, a, b, ra, rb):
     capsule (ra == rb) and a good approximation when the radii differ by much less than the
     length, which is how it is used here.
     """
-    a = np.asarray(a, float)
-    b = np.asarray(b, float)
-    ab = b - a
-    t = np.clip(((p - a) @ ab) / (ab @ ab), 0.0, 1.0)
-    closest = a + t[..., None] * ab
-    return np.linalg.norm(p - closest, axis=-1) - (ra + (rb - ra) * t)
+    ab = [b[i] - a[i] for i in range(3)]
+    d = [p[..., i] - a[i] for i in range(3)]
+    t = np.clip((d[0] * ab[0] + d[1] * ab[1] + d[2] * ab[2]) / (ab[0] ** 2 + ab[1] ** 2 + ab[2] ** 2), 0.0, 1.0)
+    e = [d[i] - t * ab[i] for i in range(3)]
+    return np.sqrt(e[0] ** 2 + e[1] ** 2 + e[2] ** 2) - (ra + (rb - ra) * t)
 
 
 def mirror_x(f):

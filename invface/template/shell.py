@@ -41,38 +41,47 @@ def orient(X, tets):
 
 
 def embed_fine(coarse, fine, factor, X, tets, n_layers):
-    """Barycentric embedding of the fine skin's vertices in the top layer of tets.
+    """Barycentric embedding of the fine skin's vertices in the coarse tet mesh.
 
-    Returns (tet id (Vf,), weights (Vf,4)). Fine vertex (I, J) lies in coarse cell
-    (I // f, J // f); its duplicates on a slit use the cell below the slit.
+    Fine vertex (I, J) lies near coarse cell (I // f, J // f). The candidates are the tets of
+    every layer under that cell and its 8 neighbours, never across a slit (a lip vertex is
+    embedded in its own lip); the tet with the largest minimum barycentric weight wins, so
+    a vertex inside the mesh gets weights in [0, 1] and one outside the coarse skin the
+    mildest extrapolation. Returns (tet id (Vf,), weights (Vf,4)).
     """
     ni, nj = coarse.shape
     fg = fine.vertex_grid()
     Vf = fine.positions()
+    n_grid_f = fine.shape[0] * fine.shape[1]
+    dup_name = np.array([""] * n_grid_f + list(fine.dup_slit), dtype=object)
     ci = np.minimum(fg[:, 0] // factor, ni - 2)
     cj = np.minimum(fg[:, 1] // factor, nj - 2)
-    n_grid_f = fine.shape[0] * fine.shape[1]
-    is_dup = np.arange(len(fg)) >= n_grid_f
-    cj = np.where(is_dup, fg[:, 1] // factor - 1, cj)
-    # candidate tets: the 2 triangles of the cell x 3 tets of the top layer
     n_tri = len(coarse.triangles)
     key = coarse.tri_cells[:, 0] * nj + coarse.tri_cells[:, 1]
     order = np.argsort(key, kind="stable")
-    first = np.searchsorted(key[order], ci * nj + cj)
-    cand = []
-    for t in range(2):
-        tri_id = order[np.minimum(first + t, n_tri - 1)]
-        for m in range(3):
-            cand.append(m * n_tri + tri_id)    # tet id layout of prism_tets, layer 0
-    cand = np.stack(cand, 1)
-    best_w = None
-    best_t = None
+    best_t = np.zeros(len(fg), np.int64)
+    best_w = np.zeros((len(fg), 4))
     best_score = np.full(len(fg), -np.inf)
-    for c in range(cand.shape[1]):
-        w = barycentric(X, tets, cand[:, c], Vf)
-        score = w.min(1)
-        better = score > best_score
-        best_score = np.where(better, score, best_score)
-        best_t = np.where(better, cand[:, c], best_t if best_t is not None else cand[:, c])
-        best_w = np.where(better[:, None], w, best_w if best_w is not None else w)
-    return best_t.astype(np.int64), best_w
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            ci2 = np.clip(ci + di, 0, ni - 2)
+            cj2 = np.clip(cj + dj, 0, nj - 2)
+            allowed = np.ones(len(fg), bool)
+            for s in coarse.slits:
+                near = (ci2 >= s.i0) & (ci2 < s.i1)
+                lower = (fg[:, 1] < s.row * factor) | (dup_name == s.name)
+                across = np.where(lower, cj2 >= s.row, cj2 <= s.row - 1)
+                allowed &= ~(near & across)
+            first = np.searchsorted(key[order], ci2 * nj + cj2)
+            for t in range(2):
+                tri_id = order[np.minimum(first + t, n_tri - 1)]
+                for layer in range(n_layers):
+                    for m in range(3):
+                        cand = (3 * layer + m) * n_tri + tri_id   # layout of prism_tets
+                        w = barycentric(X, tets, cand, Vf)
+                        score = np.where(allowed, w.min(1), -np.inf)
+                        better = score > best_score
+                        best_score = np.where(better, score, best_score)
+                        best_t = np.where(better, cand, best_t)
+                        best_w = np.where(better[:, None], w, best_w)
+    return best_t, best_w

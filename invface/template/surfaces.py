@@ -106,12 +106,10 @@ def _slit_line(p0, p1, n, sag=0.0):
 
 
 def _angles_of(xy):
-    out = []
-    for x, y in xy:
-        p = grid.point_at(skin_field, x, y)
-        d = (p - grid.CENTER) / np.linalg.norm(p - grid.CENTER)
-        out.append(grid.angles(d))
-    return np.array(out)
+    """(n,2) ray angles of the skin points seen from the front at xy (n,2)."""
+    p = grid.point_at(skin_field, xy[:, 0], xy[:, 1])
+    d = (p - grid.CENTER) / np.linalg.norm(p - grid.CENTER, axis=-1, keepdims=True)
+    return np.stack(grid.angles(d), -1)
 
 
 def _sizing(p):

@@ -1,0 +1,127 @@
+"""FaceModel: everything about one actor (surface rig, anatomy, muscles), one .npz bundle."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InvfaceError
+from .controls import Controls
+from .rig import blendshape_surface, jaw_transform, skin
+
+
+@dataclass
+class Muscle:
+    """One muscle embedded in the flesh mesh.
+
+    tets: (n,) flesh tet ids; fibers: (n,3) unit fibre directions; centerline: (P,3) m,
+    from origin (on bone) to insertion (skin/lips), closed rings repeat their first point;
+    activation_curve: (Q,2) piecewise-linear map from normalised centre-line length L/L0
+    to activation in [0, 1] (paper 000 Eq. 9); side: 'L', 'R' or 'M' (midline).
+    """
+    name: str
+    tets: np.ndarray
+    fibers: np.ndarray
+    centerline: np.ndarray
+    activation_curve: np.ndarray
+    side: str = "M"
+
+    @property
+    def rest_length(self) -> float:
+        """Rest length L0 (m) of the centre-line polyline (Eq. 9 at rest)."""
+        return float(np.linalg.norm(np.diff(self.centerline, axis=0), axis=1).sum())
+
+    def activation(self, length):
+        """Activation a(L) from the activation-length curve; length in metres."""
+        c = self.activation_curve
+        return np.interp(np.asarray(length) / self.rest_length, c[:, 0], c[:, 1])
+
+
+@dataclass
+class FaceModel:
+    """An actor's face: hybrid blendshape rig (Eq. 1-2) plus the anatomical model.
+
+    Shapes: V surface vertices, F triangles, K blendshapes, N tet vertices, T tets.
+    All positions in metres (+Y up, face along +Z, +X the actor's left).
+    """
+    neutral: np.ndarray                 # (V,3)
+    triangles: np.ndarray               # (F,3)
+    blendshape_names: list              # K names (FACS-style)
+    blendshapes: np.ndarray             # (K,V,3) deltas
+    jaw_pivot: np.ndarray               # (3,)
+    jaw_frame: np.ndarray               # (3,3) columns = jaw axes (x = hinge axis)
+    jaw_weights: np.ndarray             # (V,) surface skinning weights in [0,1]
+    rest_positions: np.ndarray          # (N,3)
+    tets: np.ndarray                    # (T,4)
+    fixed_cranium: np.ndarray           # tet-vertex ids attached to the cranium
+    fixed_jaw: np.ndarray               # tet-vertex ids attached to the jaw
+    embed_tets: np.ndarray              # (V,) tet containing each surface vertex
+    embed_weights: np.ndarray           # (V,4) barycentric weights
+    volume_jaw_weights: np.ndarray      # (N,)
+    muscles: list                       # list[Muscle]
+    landmarks: dict                     # name -> surface vertex id
+    curves: dict                        # name -> (n,) surface vertex ids (polyline)
+    cranium_mesh: tuple                 # (vertices (Bc,3), triangles (Fc,3))
+    jaw_mesh: tuple                     # (vertices (Bj,3), triangles (Fj,3))
+    blendshape_activations: np.ndarray = None   # (K, M) activations that made each shape
+    track_displacements: np.ndarray = None      # (K,N,3) Poisson dX_k (paper 000 Eq. 11)
+    meta: dict = field(default_factory=dict)
+
+    # -- public API -------------------------------------------------------------------
+    @classmethod
+    def load(cls, path) -> "FaceModel":
+        """Load and validate a bundle; raises BundleError naming the bad field."""
+        from .bundle import load_bundle
+        return load_bundle(path)
+
+    def save(self, path) -> None:
+        """Write the bundle atomically (temporary file, then rename)."""
+        from .bundle import save_bundle
+        save_bundle(self, path)
+
+    @property
+    def muscle_names(self):
+        return [m.name for m in self.muscles]
+
+    def muscle(self, name) -> Muscle:
+        for m in self.muscles:
+            if m.name == name:
+                return m
+        raise InvfaceError(f"unknown muscle '{name}'; the model has: {', '.join(self.muscle_names)}")
+
+    def jaw_matrix(self, jaw) -> np.ndarray:
+        """4x4 jaw transform for jaw parameters (6,)."""
+        return jaw_transform(jaw, self.jaw_pivot, self.jaw_frame)
+
+    def surface(self, w=None, kind="blendshape") -> np.ndarray:
+        """Surface vertex positions x(w) (V,3) in metres, before the rigid head pose.
+
+        kind="blendshape": Eq. 1-2, x = T(j)(n + B b).
+        kind="simulation": the blendshape-driven muscle simulation (paper 000 Sec. 6).
+        """
+        c = Controls.coerce(w, self.blendshape_names)
+        if kind == "blendshape":
+            return blendshape_surface(self.neutral, self.blendshapes, c.weight_vector(self.blendshape_names),
+                                      c.jaw, self.jaw_pivot, self.jaw_frame, self.jaw_weights)
+        if kind == "simulation":
+            raise InvfaceError("kind='simulation' needs the muscle simulation (invface.sim), which this "
+                               "version does not include yet; use kind='blendshape'")
+        raise InvfaceError(f"unknown surface kind '{kind}': use 'blendshape' or 'simulation'")
+
+    def embedded_surface(self, X) -> np.ndarray:
+        """Surface positions (V,3) from tet-mesh positions X (N,3) through the embedding."""
+        return np.einsum("vk,vkd->vd", self.embed_weights, X[self.tets[self.embed_tets]])
+
+    def skinned_volume(self, jaw) -> np.ndarray:
+        """Rest tet positions moved rigidly by the jaw with volumetric jaw weights (N,3)."""
+        return skin(self.rest_positions, self.volume_jaw_weights, self.jaw_matrix(jaw))
+
+    def summary(self) -> dict:
+        """Counts and quality figures for printing."""
+        from ..mesh.tets import quality_summary
+        q = quality_summary(self.rest_positions, self.tets)
+        return {"surface_vertices": int(len(self.neutral)), "surface_triangles": int(len(self.triangles)),
+                "blendshapes": len(self.blendshape_names), "muscles": len(self.muscles),
+                "muscle_tets": int(sum(len(m.tets) for m in self.muscles)),
+                "fixed_cranium": int(len(self.fixed_cranium)), "fixed_jaw": int(len(self.fixed_jaw)),
+                "landmarks": len(self.landmarks), "curves": len(self.curves), **q}

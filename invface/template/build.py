@@ -1,0 +1,150 @@
+"""Generate the built-in anatomical head deterministically, and cache it."""
+from __future__ import annotations
+
+import hashlib
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError, MeshError
+from ..mesh.tets import harmonic, laplacian, quality_summary
+from ..model.facemodel import FaceModel
+from . import grid
+from .features import find_features
+from .muscles import build_muscles
+from .shape import JAW_PIVOT, MOUTH_Y, tissue_depth
+from .shell import embed_fine, layer_radii, orient, prism_tets
+from .surfaces import build_grids
+
+GENERATOR_VERSION = "1"
+# Quality bounds every generated mesh must meet (checked at build time and in the tests).
+MIN_DIHEDRAL_DEG = 2.0
+MIN_RADIUS_RATIO = 0.02
+_DEPTH_RANGE = (0.003, 0.035)
+
+
+def depth_of(p):
+    """Soft-tissue depth (m) along the ray at skin points p (..., 3), clamped to a sane range."""
+    return np.clip(tissue_depth(p), *_DEPTH_RANGE)
+
+
+def sizes(resolution):
+    """Grid and layer counts for a resolution factor (1 = default, ~35k tets; tets ~ linear)."""
+    if not (0.05 <= resolution <= 100):
+        raise ConfigError(f"template resolution must be in [0.05, 100], got {resolution}")
+    layers = max(2, int(round(3 * resolution ** (1 / 3))))
+    scale = resolution * 3 / layers
+    n_alpha = int(round(48 * np.sqrt(scale))) | 1
+    n_beta = int(round(41 * np.sqrt(scale))) + 1
+    factor = max(1, int(np.ceil(3 / np.sqrt(scale))))
+    return n_alpha, n_beta, layers, factor
+
+
+def _regions(P):
+    """Classify inner-surface points P (n,3): 0 cranium, 1 jaw, 2 free (lips/cheeks mucosa)."""
+    x, y, z = P[:, 0], P[:, 1], P[:, 2]
+    free = ((x / 0.056) ** 2 + ((y - MOUTH_Y) / 0.017) ** 2 < 1) & (z > 0.02)
+    # below the occlusal plane (mouth line tilted up towards the condyles) moves with the jaw
+    occl = MOUTH_Y + (0.113 - z) * (JAW_PIVOT[1] - MOUTH_Y) / (0.113 - JAW_PIVOT[2])
+    jaw = (y < occl) & (y > -0.105) & (z > -0.005)
+    return np.where(free, 2, np.where(jaw, 1, 0))
+
+
+def generate(resolution=1.0, progress=None):
+    """Build the template FaceModel. resolution scales the tet count (~35k at 1, ~350k at 10)."""
+    say = progress or (lambda msg: None)
+    t0 = time.perf_counter()
+    n_alpha, n_beta, n_layers, factor = sizes(resolution)
+    say(f"skin grids {n_alpha}x{n_beta} (render x{factor})")
+    coarse, fine = build_grids(n_alpha, n_beta, factor)
+
+    say(f"flesh: {n_layers} layers of prisms")
+    ni, nj = coarse.shape
+    skin_grid_pts = coarse.positions()[: ni * nj].reshape(ni, nj, 3)
+    r_inner = coarse.r - depth_of(skin_grid_pts)
+    R = layer_radii(coarse.r, r_inner, n_layers)
+    X = np.concatenate([coarse.positions(R[k]) for k in range(n_layers + 1)])
+    Ns = len(coarse.positions())
+    tets = orient(X, prism_tets(coarse.triangles, Ns, n_layers))
+    q = quality_summary(X, tets)
+    if q["inverted"] or q["min_dihedral_deg"] < MIN_DIHEDRAL_DEG or q["min_radius_ratio"] < MIN_RADIUS_RATIO:
+        raise MeshError(f"generated flesh mesh fails the quality bounds: {q}")
+
+    inner = np.arange(n_layers * Ns, (n_layers + 1) * Ns)
+    region = _regions(X[inner])
+    fixed_cranium = inner[region == 0]
+    fixed_jaw = inner[region == 1]
+
+    say("jaw weights (harmonic solve)")
+    Lap = laplacian(X, tets)
+    fixed = np.concatenate([fixed_cranium, fixed_jaw])
+    vw = harmonic(Lap, fixed, np.concatenate([np.zeros(len(fixed_cranium)), np.ones(len(fixed_jaw))]))
+    vw = np.clip(vw, 0.0, 1.0)
+
+    say("embedding the render skin")
+    Vf = fine.positions()
+    etet, ew = embed_fine(coarse, fine, factor, X, tets, n_layers)
+    jaw_w = np.clip(np.einsum("vk,vk->v", ew, vw[tets[etet]]), 0.0, 1.0)
+
+    say("muscles")
+    muscles = build_muscles(X, tets, depth_of)
+
+    say("landmarks and curves")
+    landmarks, curves = find_features(fine, Vf)
+
+    # bone surfaces: the inner layer, pushed 1 mm behind the free mucosa (teeth/gums)
+    bone = X[inner].copy()
+    d = bone - grid.CENTER
+    bone -= np.where(region == 2, 0.001, 0.0)[:, None] * d / np.linalg.norm(d, axis=1, keepdims=True)
+    tri_region = np.round(np.mean(region[coarse.triangles] == 1, axis=1)).astype(int)
+
+    def submesh(mask):
+        tri = coarse.triangles[mask]
+        used, inv = np.unique(tri, return_inverse=True)
+        return bone[used], inv.reshape(-1, 3).astype(np.int64)
+
+    model = FaceModel(
+        neutral=Vf, triangles=fine.triangles.astype(np.int64), blendshape_names=[],
+        blendshapes=np.zeros((0, len(Vf), 3)), jaw_pivot=JAW_PIVOT.copy(), jaw_frame=np.eye(3),
+        jaw_weights=jaw_w, rest_positions=X, tets=tets.astype(np.int64),
+        fixed_cranium=fixed_cranium.astype(np.int64), fixed_jaw=fixed_jaw.astype(np.int64),
+        embed_tets=etet, embed_weights=ew, volume_jaw_weights=vw, muscles=muscles,
+        landmarks=landmarks, curves=curves,
+        cranium_mesh=submesh(tri_region == 0), jaw_mesh=submesh(tri_region == 1),
+        meta={"generator": "invface.template", "generator_version": GENERATOR_VERSION,
+              "resolution": float(resolution), "layers": n_layers, "grid": [n_alpha, n_beta],
+              "render_subdivision": factor, "build_seconds": round(time.perf_counter() - t0, 2),
+              "quality": q},
+    )
+    return model
+
+
+def cache_dir() -> Path:
+    """User cache directory (INVFACE_CACHE, else XDG_CACHE_HOME/invface, else ~/.cache/invface)."""
+    if os.environ.get("INVFACE_CACHE"):
+        return Path(os.environ["INVFACE_CACHE"])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "invface"
+
+
+def cache_path(resolution=1.0) -> Path:
+    """Cache file keyed on generator version and options (and this module's source)."""
+    src = b"".join(p.read_bytes() for p in sorted(Path(__file__).parent.glob("*.py")))
+    key = hashlib.sha1(src + f"{GENERATOR_VERSION}:{float(resolution):.6g}".encode()).hexdigest()[:12]
+    return cache_dir() / f"template-r{float(resolution):g}-{key}.npz"
+
+
+def build(resolution=1.0, force=False, cache=True, progress=None) -> FaceModel:
+    """The built-in head as a FaceModel (cached). ``force`` regenerates it."""
+    path = cache_path(resolution)
+    if cache and path.exists() and not force:
+        return FaceModel.load(path)
+    model = generate(resolution, progress=progress)
+    if cache:
+        try:
+            model.save(path)
+        except OSError:
+            pass   # a read-only cache is not an error: the model is still returned
+    return model

@@ -1,0 +1,122 @@
+"""Landmarks and feature curves of the template's render skin.
+
+Landmarks follow paper 001 (Fig. 6: the 17 profile, eye, mouth, nose and head landmarks)
+plus a few used for proportions. They are found by geometric rules on the generated mesh
+(slit ends, profile extrema, silhouettes, grooves), not placed at fixed coordinates.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from . import grid
+from .shape import MOUTH_Y, skin_field
+
+
+def _dedupe(ids):
+    ids = np.asarray(ids)
+    keep = np.concatenate([[True], ids[1:] != ids[:-1]])
+    return ids[keep]
+
+
+def curve_from_points(tree, pts, step=0.0005):
+    """Vertex polyline (n,) following the 3D polyline pts (m,3) through nearest vertices."""
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    s = np.concatenate([[0], np.cumsum(seg)])
+    u = np.linspace(0, s[-1], max(int(s[-1] / step), 2) + 1)
+    dense = np.stack([np.interp(u, s, pts[:, k]) for k in range(3)], 1)
+    return _dedupe(tree.query(dense)[1])
+
+
+def frontal_curve(tree, xy):
+    """Vertex polyline through the skin points seen from the front at xy (m,2)."""
+    xy = np.asarray(xy, float)
+    return curve_from_points(tree, grid.point_at(skin_field, xy[:, 0], xy[:, 1]))
+
+
+def _mirror_xy(xy):
+    return [(-x, y) for x, y in xy]
+
+
+def find_features(fine, V):
+    """(landmarks dict name -> vertex id, curves dict name -> vertex ids) on the fine skin.
+
+    fine: the fine SkinGrid; V (Vf,3) its vertex positions.
+    """
+    tree = cKDTree(V)
+    ni, nj = fine.shape
+    idx = fine.grid_index()
+    profile = idx[ni // 2, :]                        # midline, bottom to top
+    P = V[profile]
+    L = {}
+    mouth_up = fine.slit_vertices("mouth", "upper")
+    L["mouth_corner_R"], L["mouth_corner_L"] = int(mouth_up[0]), int(mouth_up[-1])
+    L["stomion"] = int(mouth_up[len(mouth_up) // 2])
+    eL = fine.slit_vertices("eye_L", "upper")
+    eR = fine.slit_vertices("eye_R", "upper")
+    L["eye_inner_L"], L["eye_outer_L"] = int(eL[0]), int(eL[-1])
+    L["eye_outer_R"], L["eye_inner_R"] = int(eR[0]), int(eR[-1])
+
+    tip = int(np.argmax(P[:, 2]))
+    L["nose_tip"] = int(profile[tip])
+    above = np.nonzero((np.arange(len(P)) > tip) & (P[:, 1] < 0.06))[0]
+    L["nose_bridge"] = int(profile[above[np.argmin(P[above, 2])]])          # sellion
+    stom_y = V[L["stomion"], 1]
+    between = np.nonzero((np.arange(len(P)) < tip) & (P[:, 1] > stom_y + 0.004))[0]
+    L["subnasale"] = int(profile[between[np.argmin(P[between, 2])]])
+    below = np.nonzero(P[:, 1] < stom_y - 0.012)[0]
+    chin = below[np.argmax(P[below, 2] - P[below, 1])]                       # most down-forward point
+    L["chin"] = int(profile[chin])
+    front = below[P[below, 2] > 0.0]
+    L["neck_start"] = int(profile[front[np.argmin(np.abs(P[front, 1] - (P[chin, 1] - 0.02)))]])
+    L["top_of_head"] = int(profile[np.argmax(P[:, 1])])
+    brow = np.nonzero((P[:, 1] > 0.045) & (P[:, 1] < 0.075))[0]
+    L["glabella"] = int(profile[brow[np.argmax(P[brow, 2])]])
+    L["head_extreme_L"] = int(np.argmax(V[:, 0]))
+    L["head_extreme_R"] = int(np.argmin(V[:, 0]))
+
+    # alar grooves: on the row at the nostril level, the first depth minimum beside the nose
+    y_al = 0.5 * (V[L["nose_tip"], 1] + V[L["subnasale"], 1])
+    row = int(np.argmin(np.abs(P[:, 1] - y_al)))
+    for side, cols in (("L", np.arange(ni // 2, ni)), ("R", np.arange(ni // 2, -1, -1))):
+        z = V[idx[cols, row], 2]
+        k = 1
+        while k < len(z) - 1 and not (z[k] <= z[k - 1] and z[k] <= z[k + 1]):
+            k += 1
+        L[f"alar_{side}"] = int(idx[cols[k], row])
+
+    def silhouette(y, side):
+        m = (np.abs(V[:, 1] - y) < 0.0015) & (V[:, 2] > 0.03)
+        cand = np.nonzero(m)[0]
+        return int(cand[np.argmax(V[cand, 0])] if side == "L" else cand[np.argmin(V[cand, 0])])
+
+    for s in "LR":
+        L[f"cheek_contour_{s}"] = silhouette(0.015, s)
+        L[f"jaw_contour_{s}"] = silhouette(-0.045, s)
+        sx = 1 if s == "L" else -1
+        m = (np.abs(V[:, 0] - sx * 0.030) < 0.002) & (V[:, 1] > 0.045) & (V[:, 1] < 0.075)
+        cand = np.nonzero(m)[0]
+        L[f"brow_{s}"] = int(cand[np.argmax(V[cand, 2])])
+
+    C = {}
+    C["lip_inner_upper"] = mouth_up
+    C["lip_inner_lower"] = fine.slit_vertices("mouth", "lower")
+    for s in "LR":
+        C[f"eye_{s}_upper"] = fine.slit_vertices(f"eye_{s}", "upper")
+        C[f"eye_{s}_lower"] = fine.slit_vertices(f"eye_{s}", "lower")
+    xc = abs(V[L["mouth_corner_L"], 0])
+    xs = np.linspace(-xc, xc, 21)
+    bow = 1 - (xs / xc) ** 2
+    C["lip_outer_upper"] = frontal_curve(tree, np.stack([xs, MOUTH_Y + 0.0095 * bow ** 0.7
+                                                         - 0.0012 * np.exp(-(xs / 0.004) ** 2)], 1))
+    C["lip_outer_lower"] = frontal_curve(tree, np.stack([xs, MOUTH_Y - 0.0105 * bow ** 0.6], 1))
+    brow_xy = [(0.012, 0.057), (0.022, 0.060), (0.033, 0.060), (0.045, 0.057), (0.052, 0.053)]
+    C["brow_L"] = frontal_curve(tree, brow_xy)
+    C["brow_R"] = frontal_curve(tree, _mirror_xy(brow_xy))
+    bridge = np.nonzero((np.arange(len(P)) >= tip) & (P[:, 1] <= V[L["nose_bridge"], 1] + 1e-9))[0]
+    C["nose_bridge"] = profile[bridge[::-1]]
+    C["nose_base"] = curve_from_points(tree, V[[L["alar_R"], L["subnasale"], L["alar_L"]]])
+    jaw_xy = [(0.068, -0.015), (0.062, -0.045), (0.048, -0.064), (0.026, -0.076), (0.0, -0.080)]
+    C["jaw_line"] = frontal_curve(tree, _mirror_xy(jaw_xy) + jaw_xy[::-1][1:])
+    C["profile"] = profile
+    return L, C
