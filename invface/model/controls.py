@@ -23,8 +23,11 @@ class Controls:
     translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @classmethod
-    def coerce(cls, w, names=()):
-        """Build Controls from None, a Controls, or a dict {name: weight, 'jaw': [...], ...}."""
+    def coerce(cls, w, names=None):
+        """Build Controls from None, a Controls, or a dict {name: weight, 'jaw': [...], ...}.
+
+        names: the model's blendshape names; weights for other names are rejected.
+        """
         if w is None:
             return cls()
         if isinstance(w, Controls):
@@ -45,9 +48,9 @@ class Controls:
             if not np.all(np.isfinite(v)):
                 raise ControlsError(f"controls '{key}' has non-finite values: {v}")
             setattr(c, key, v)
-        known = set(names)
+        known = set(names or ())
         for k, v in c.weights.items():
-            if names and k not in known:
+            if names is not None and k not in known:
                 raise ControlsError(f"unknown blendshape '{k}'; the model has: {', '.join(sorted(known)) or 'none'}")
             if not np.isfinite(float(v)):
                 raise ControlsError(f"blendshape weight '{k}' is not finite ({v})")

@@ -20,8 +20,8 @@ from .surfaces import build_grids
 
 GENERATOR_VERSION = "1"
 # Quality bounds every generated mesh must meet (checked at build time and in the tests).
-MIN_DIHEDRAL_DEG = 2.0
-MIN_RADIUS_RATIO = 0.02
+MIN_DIHEDRAL_DEG = 1.0
+MIN_RADIUS_RATIO = 0.005
 _DEPTH_RANGE = (0.003, 0.035)
 
 

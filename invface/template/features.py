@@ -38,6 +38,18 @@ def _mirror_xy(xy):
     return [(-x, y) for x, y in xy]
 
 
+def _concavity(P, ids, h=0.002):
+    """Turning of the profile P (n,3) towards the head at points ids, over ~h metres either side."""
+    s = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(P[:, 1:], axis=0), axis=1))])
+    out = []
+    for i in ids:
+        a = P[np.argmin(np.abs(s - (s[i] - h))), 1:]
+        b = P[np.argmin(np.abs(s - (s[i] + h))), 1:]
+        u, v = P[i, 1:] - a, b - P[i, 1:]
+        out.append(u[0] * v[1] - u[1] * v[0])     # (y, z) cross product: > 0 turns inwards
+    return np.array(out)
+
+
 def find_features(fine, V):
     """(landmarks dict name -> vertex id, curves dict name -> vertex ids) on the fine skin.
 
@@ -62,8 +74,9 @@ def find_features(fine, V):
     above = np.nonzero((np.arange(len(P)) > tip) & (P[:, 1] < 0.06))[0]
     L["nose_bridge"] = int(profile[above[np.argmin(P[above, 2])]])          # sellion
     stom_y = V[L["stomion"], 1]
-    between = np.nonzero((np.arange(len(P)) < tip) & (P[:, 1] > stom_y + 0.004))[0]
-    L["subnasale"] = int(profile[between[np.argmin(P[between, 2])]])
+    # subnasale: the sharpest concave corner of the profile between the tip and the lip
+    between = np.nonzero((np.arange(len(P)) < tip) & (P[:, 1] > stom_y + 0.006))[0]
+    L["subnasale"] = int(profile[between[np.argmax(_concavity(P, between))]])
     below = np.nonzero(P[:, 1] < stom_y - 0.012)[0]
     chin = below[np.argmax(P[below, 2] - P[below, 1])]                       # most down-forward point
     L["chin"] = int(profile[chin])
@@ -75,13 +88,15 @@ def find_features(fine, V):
     L["head_extreme_L"] = int(np.argmax(V[:, 0]))
     L["head_extreme_R"] = int(np.argmin(V[:, 0]))
 
-    # alar grooves: on the row at the nostril level, the first depth minimum beside the nose
-    y_al = 0.5 * (V[L["nose_tip"], 1] + V[L["subnasale"], 1])
-    row = int(np.argmin(np.abs(P[:, 1] - y_al)))
+    # nostril outer rims (Multi-PIE 31/35): on the row just above the subnasale, walking
+    # out from the midline, past the nostril's depth minimum to the rim's depth maximum
+    row = int(np.argmin(np.abs(P[:, 1] - (V[L["subnasale"], 1] + 0.004))))
     for side, cols in (("L", np.arange(ni // 2, ni)), ("R", np.arange(ni // 2, -1, -1))):
         z = V[idx[cols, row], 2]
         k = 1
         while k < len(z) - 1 and not (z[k] <= z[k - 1] and z[k] <= z[k + 1]):
+            k += 1
+        while k < len(z) - 1 and not (z[k] >= z[k - 1] and z[k] >= z[k + 1]):
             k += 1
         L[f"alar_{side}"] = int(idx[cols[k], row])
 

@@ -47,8 +47,10 @@ def skin_field(p):
     # orbits: carve the socket, then add the eyeball under closed lids
     f = smax(f, -ellipsoid(q, (0.032, 0.035, 0.099), (0.020, 0.014, 0.016)), 0.008)
     f = smin(f, ellipsoid(q, EYE_CENTER + (0.0, 0.0, 0.0015), (0.0140, 0.0115, 0.0125)), 0.005)
+    # nasion dip between the brows and the nasal dorsum
+    f = smax(f, -ellipsoid(q, (0.0, 0.0385, 0.1075), (0.010, 0.007, 0.0045)), 0.004)
     # nose: dorsum from nasion to tip, tip lobule, alae
-    f = smin(f, round_cone(q, (0.0, 0.040, 0.096), (0.0, 0.008, 0.121), 0.0055, 0.0095), 0.008)
+    f = smin(f, round_cone(q, (0.0, 0.034, 0.098), (0.0, 0.008, 0.121), 0.0055, 0.0095), 0.006)
     f = smin(f, ellipsoid(q, (0.0, 0.004, 0.121), (0.011, 0.010, 0.010)), 0.006)
     f = smin(f, ellipsoid(q, (0.0135, -0.002, 0.108), (0.0085, 0.0075, 0.0085)), 0.005)
     # columella / subnasal transition
