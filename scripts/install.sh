@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.."
 extra="${1:-}"
 stamp=".install-stamp${extra:+-$extra}"
 
-if ! ls /usr/lib/x86_64-linux-gnu/libLLVM.so.19* /usr/lib/*/libLLVM-19.so >/dev/null 2>&1; then
+if ! compgen -G "/usr/lib/*/libLLVM.so.19*" >/dev/null && ! compgen -G "/usr/lib/*/libLLVM-19.so" >/dev/null; then
     if command -v apt-get >/dev/null 2>&1; then
         SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
         echo "invface install: installing libllvm19 (Dr.Jit CPU backend) with apt-get"
