@@ -89,7 +89,6 @@ _DEPTH_SITES = np.array([
 
 def tissue_depth(p):
     """Soft-tissue thickness (m) at skin points p (..., 3), smooth Gaussian interpolation."""
-    q = np.abs(p[..., None, :] - 0.0)
     q = np.concatenate([np.abs(p[..., :1]), p[..., 1:]], axis=-1)[..., None, :]
     sites = _DEPTH_SITES[:, :3]
     d2 = np.sum((q - sites) ** 2, axis=-1)

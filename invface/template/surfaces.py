@@ -79,7 +79,6 @@ class SkinGrid:
 def _apply_slits(ni, nj, slits):
     idx = np.arange(ni * nj).reshape(ni, nj)
     cells, tris = grid.quad_triangles(ni, nj, idx)
-    remap = np.arange(ni * nj)
     dup_grid, dup_slit = [], []
     lower_tri = np.zeros(len(tris), bool)
     nv = ni * nj
@@ -93,7 +92,6 @@ def _apply_slits(ni, nj, slits):
         lower_tri |= below
         dup_grid += [(i, s.row) for i in interior]
         dup_slit += [s.name] * len(interior)
-    del remap
     return tris, cells, np.array(dup_grid, int).reshape(-1, 2), dup_slit
 
 
