@@ -15,7 +15,7 @@ from ..render.preview import look_at_camera, render_meshes, to_srgb8
 
 SKIN = (0.80, 0.60, 0.50)
 BONE = (0.92, 0.88, 0.74)
-VIEWS = {"front": ((0.0, 0.03, 0.62), 0.0), "three_quarter": ((0.40, 0.05, 0.47), 0.0)}
+VIEWS = {"front": (0.0, 0.03, 0.62), "three_quarter": (0.40, 0.05, 0.47)}   # camera positions, m
 
 
 def _muscle_colors(n):
@@ -72,7 +72,7 @@ def write_previews(model, folder, size=480, spp=16):
     rows = []
     for name, meshes in scenes(model).items():
         row = []
-        for view, (eye, _) in VIEWS.items():
+        for view, eye in VIEWS.items():
             eye = np.array(eye)
             if name == "tets_cutaway":   # look at the sagittal cut (x = 0) from the actor's left
                 eye = np.array([0.6, 0.05, 0.12]) if view == "front" else np.array([0.45, 0.1, 0.42])

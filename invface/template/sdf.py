@@ -45,11 +45,3 @@ def round_cone(p, a, b, ra, rb):
     e = [d[i] - t * ab[i] for i in range(3)]
     return np.sqrt(e[0] ** 2 + e[1] ** 2 + e[2] ** 2) - (ra + (rb - ra) * t)
 
-
-def mirror_x(f):
-    """Make a primitive symmetric about x = 0: f(p) evaluated at (|x|, y, z)."""
-    def g(p, *args, **kw):
-        q = p.copy()
-        q[..., 0] = np.abs(q[..., 0])
-        return f(q, *args, **kw)
-    return g
