@@ -43,13 +43,19 @@ def sizes(resolution):
 
 
 def _regions(P):
-    """Classify inner-surface points P (n,3): 0 cranium, 1 jaw, 2 free (lips/cheeks mucosa)."""
+    """Classify inner-surface points P (n,3).
+
+    Returns region (0 cranium, 1 jaw, 2 free: lip and cheek mucosa and the band along the
+    occlusal line where the mouth opens) and bone (0 cranium, 1 jaw: the bone or teeth behind
+    the point, for the bone meshes).
+    """
     x, y, z = P[:, 0], P[:, 1], P[:, 2]
-    free = ((x / 0.056) ** 2 + ((y - MOUTH_Y) / 0.017) ** 2 < 1) & (z > 0.02)
     # below the occlusal plane (mouth line tilted up towards the condyles) moves with the jaw
     occl = MOUTH_Y + (0.113 - z) * (JAW_PIVOT[1] - MOUTH_Y) / (0.113 - JAW_PIVOT[2])
     jaw = (y < occl) & (y > -0.105) & (z > -0.005)
-    return np.where(free, 2, np.where(jaw, 1, 0))
+    lips = ((x / 0.056) ** 2 + ((y - MOUTH_Y) / 0.017) ** 2 < 1) & (z > 0.02)
+    band = (np.abs(y - occl) < 0.007) & (z > 0.0)
+    return np.where(lips | band, 2, np.where(jaw, 1, 0)), jaw.astype(int)
 
 
 def generate(resolution=1.0, progress=None):
@@ -73,7 +79,7 @@ def generate(resolution=1.0, progress=None):
         raise MeshError(f"generated flesh mesh fails the quality bounds: {q}")
 
     inner = np.arange(n_layers * Ns, (n_layers + 1) * Ns)
-    region = _regions(X[inner])
+    region, bone_side = _regions(X[inner])
     fixed_cranium = inner[region == 0]
     fixed_jaw = inner[region == 1]
 
@@ -98,7 +104,7 @@ def generate(resolution=1.0, progress=None):
     bone = X[inner].copy()
     d = bone - grid.CENTER
     bone -= np.where(region == 2, 0.001, 0.0)[:, None] * d / np.linalg.norm(d, axis=1, keepdims=True)
-    tri_region = np.round(np.mean(region[coarse.triangles] == 1, axis=1)).astype(int)
+    tri_region = np.round(np.mean(bone_side[coarse.triangles], axis=1)).astype(int)
 
     def submesh(mask):
         tri = coarse.triangles[mask]

@@ -1,0 +1,126 @@
+"""Sparse symmetric positive-definite solvers behind one small interface.
+
+    solver = make_solver(pattern)      # symbolic analysis once per sparsity pattern
+    solver.factor(data)                # numeric factorisation per Newton step (raises NotSPD)
+    x = solver.solve(b)                # (n,) or (n, k) right-hand sides, reusing the factor
+
+PARDISO (Intel MKL through pypardiso's library, mtype 2 = real SPD, upper-triangular CSR,
+phase 11 once, 22 per factorisation, 33 per solve) is the default: pip-only and measured
+fastest on the 2-core machine (bench/RESULTS.md). SuperLU (scipy) is the always-available
+fallback; it checks definiteness with a sparse LDL-free test (the sign of U's diagonal).
+INVFACE_SOLVER=pardiso|superlu forces one.
+"""
+from __future__ import annotations
+
+import ctypes
+import os
+
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from ..errors import DependencyError, InvfaceError
+
+
+class NotSPD(InvfaceError):
+    """The matrix handed to factor() is not positive definite."""
+
+
+class PardisoSolver:
+    name = "pardiso"
+
+    def __init__(self, pattern):
+        try:
+            from pypardiso.pardiso_wrapper import PyPardisoSolver
+        except ImportError as e:    # pragma: no cover - depends on the install
+            raise DependencyError("pypardiso is not installed (pip install pypardiso)") from e
+        self._lib = PyPardisoSolver().libmkl.pardiso
+        self.n = pattern.n
+        self._ia = (pattern.indptr + 1).astype(np.int32)
+        self._ja = (pattern.indices + 1).astype(np.int32)
+        self._pt = np.zeros(64, np.int64)
+        self._iparm = np.zeros(64, np.int32)
+        self._data = np.zeros(pattern.nnz)
+        self._call(11, np.zeros(self.n))
+
+    def _call(self, phase, b):
+        b = np.asfortranarray(b, dtype=float)
+        x = np.zeros_like(b)
+        err = ctypes.c_int32(0)
+        i32 = ctypes.POINTER(ctypes.c_int32)
+        f64 = ctypes.POINTER(ctypes.c_double)
+        self._lib(self._pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)),
+                  ctypes.byref(ctypes.c_int32(1)), ctypes.byref(ctypes.c_int32(1)),
+                  ctypes.byref(ctypes.c_int32(2)), ctypes.byref(ctypes.c_int32(phase)),
+                  ctypes.byref(ctypes.c_int32(self.n)), self._data.ctypes.data_as(f64),
+                  self._ia.ctypes.data_as(i32), self._ja.ctypes.data_as(i32),
+                  np.zeros(0, np.int32).ctypes.data_as(i32),
+                  ctypes.byref(ctypes.c_int32(1 if b.ndim == 1 else b.shape[1])),
+                  self._iparm.ctypes.data_as(i32), ctypes.byref(ctypes.c_int32(0)),
+                  b.ctypes.data_as(f64), x.ctypes.data_as(f64), ctypes.byref(err))
+        return err.value, np.ascontiguousarray(x)
+
+    def factor(self, data):
+        self._data = np.ascontiguousarray(data, float)
+        err, _ = self._call(22, np.zeros(self.n))
+        if err == -4:
+            raise NotSPD("Newton matrix is not positive definite")
+        if err != 0:
+            raise InvfaceError(f"PARDISO factorisation failed (error {err})")
+
+    def solve(self, b):
+        err, x = self._call(33, b)
+        if err != 0:
+            raise InvfaceError(f"PARDISO solve failed (error {err})")
+        return x
+
+    def __del__(self):
+        try:
+            if self._pt.any():
+                self._call(-1, np.zeros(self.n))
+        except Exception:
+            pass
+
+
+class SuperLUSolver:
+    name = "superlu"
+
+    def __init__(self, pattern):
+        self.pattern = pattern
+        self._lu = None
+
+    def factor(self, data):
+        A = self.pattern.matrix(data, full=True).tocsc()
+        try:
+            lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                           options={"SymmetricMode": True})
+        except RuntimeError as e:
+            raise NotSPD(f"Newton matrix is singular ({e})") from e
+        # With symmetric diagonal pivoting, A = P^T L U P and U's diagonal holds the pivots;
+        # an SPD matrix has them all positive.
+        if np.any(lu.U.diagonal() <= 0) or np.any(lu.perm_r != lu.perm_c):
+            raise NotSPD("Newton matrix is not positive definite")
+        self._lu = lu
+
+    def solve(self, b):
+        return self._lu.solve(np.asarray(b, float))
+
+
+def available():
+    """Names of the solvers that can run here, best first."""
+    names = []
+    try:
+        import pypardiso  # noqa: F401
+        names.append("pardiso")
+    except ImportError:
+        pass
+    return names + ["superlu"]
+
+
+def make_solver(pattern, name=None):
+    """A solver for ``pattern`` (fem.Pattern): name or INVFACE_SOLVER, else the best available."""
+    name = name or os.environ.get("INVFACE_SOLVER") or available()[0]
+    if name == "pardiso":
+        return PardisoSolver(pattern)
+    if name == "superlu":
+        return SuperLUSolver(pattern)
+    raise InvfaceError(f"unknown sparse solver {name!r}; choose from {available()}")

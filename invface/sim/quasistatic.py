@@ -1,0 +1,337 @@
+"""Quasistatic flesh simulation: Newton-Raphson on Eq. 3 / Eq. 6 of paper 000.
+
+    sim = Simulator(model)                                 # set-up once per model
+    res = sim.solve({"zygomaticus_major_L": 0.8}, jaw=...) # steady state X (N,3)
+    res2 = sim.solve(acts2, warm=res)                      # warm start
+
+The unknowns are the free flesh vertices X^U; cranium vertices are fixed at rest, jaw
+vertices follow the 6-DOF jaw transform. The steady state zeroes the sum of FVM, collision
+and track forces, i.e. it is a stationary point of the total energy
+
+    E(X) = sum_t V_t Psi(F_t; a) + E_collisions(X) + sum_v k_v/2 |x_v - t_v|^2.
+
+Each Newton step factorises the exact Hessian first and falls back to the per-element
+definiteness-projected one when the factorisation fails or the step is not a descent
+direction (DESIGN.md: exact-first took 5 iterations where always-projected took 23). A
+backtracking Armijo line search on E that also refuses to create inverted tets follows.
+The factorisation of the exact Hessian at the solution is kept on the result for the
+tangent/adjoint solves of the next stage.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InvfaceError, MeshError
+from . import linsolve
+from .collisions import Collisions, ContactSet
+from .fem import Elements, FleshModel, Pattern
+from .materials import Material
+from .tracks import Tracks
+
+
+class SimulationError(InvfaceError):
+    """The quasistatic solve failed; the message carries the failure report."""
+
+
+@dataclass
+class SimResult:
+    """A converged (or reported) quasistatic state.
+
+    X (N,3) m flesh positions; activations (M,); jaw (6,); iterations; residuals: relative
+    residual per iteration; energy J; inverted: number of inverted tets; min_J: smallest
+    volume ratio; seconds: wall time by phase; solver: the factorised exact Newton matrix at
+    X (free DOFs; None when not kept); contacts: the active ContactSet at X.
+    """
+    X: np.ndarray
+    activations: np.ndarray
+    jaw: np.ndarray
+    converged: bool
+    iterations: int
+    residuals: list
+    energy: float
+    inverted: int
+    min_J: float
+    seconds: dict = field(default_factory=dict)
+    solver: object = None
+    contacts: ContactSet = None
+    tracks: Tracks = None
+
+    def report(self):
+        """One-paragraph status line for logs and errors."""
+        r = self.residuals[-1] if self.residuals else float("nan")
+        state = "converged" if self.converged else "did NOT converge"
+        return (f"Newton {state} in {self.iterations} iterations: relative residual {r:.2e}, "
+                f"{self.inverted} inverted tets (min volume ratio {self.min_J:.3f}), "
+                f"{sum(self.seconds.values()):.2f} s")
+
+
+def _check_manifold(tets):
+    faces = np.sort(tets[:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]].reshape(-1, 3), axis=1)
+    _, counts = np.unique(faces, axis=0, return_counts=True)
+    if np.any(counts > 2):
+        raise MeshError(f"the flesh tet mesh is non-manifold: {int((counts > 2).sum())} triangles are "
+                        "shared by more than two tets")
+    if len(np.unique(np.sort(tets, axis=1), axis=0)) != len(tets):
+        raise MeshError("the flesh tet mesh has duplicated tets")
+
+
+class Simulator:
+    """Quasistatic muscle simulation of a FaceModel's flesh.
+
+    material: Material constants; contact: include collision penalties; contact_stiffness
+    (N/m; default 50 x shear modulus x mean edge length); solver: 'pardiso' | 'superlu' | None.
+    """
+
+    def __init__(self, model, material: Material | None = None, contact=True,
+                 contact_stiffness=None, solver=None):
+        self.model = model
+        self.material = material or Material()
+        X0 = np.asarray(model.rest_positions, float)
+        tets = np.asarray(model.tets, np.int64)
+        N = len(X0)
+        if not np.all(np.isfinite(X0)):
+            raise MeshError("the rest flesh positions contain NaN or infinite values")
+        _check_manifold(tets)
+        self.elements = Elements(X0, tets)
+        self.N = N
+        constrained = np.zeros(N, bool)
+        constrained[model.fixed_cranium] = True
+        constrained[model.fixed_jaw] = True
+        if constrained.all():
+            raise MeshError("every flesh vertex is constrained: nothing to simulate")
+        self.free = np.flatnonzero(~constrained)
+        dof = np.full(N, -1, np.int64)
+        dof[self.free] = np.arange(len(self.free))
+        self.dof_of_vertex = dof
+
+        self.muscle_names = [m.name for m in model.muscles]
+        ft = [m.tets for m in model.muscles]
+        self.flesh = FleshModel(
+            self.elements, self.material,
+            np.concatenate(ft) if ft else np.zeros(0, np.int64),
+            np.concatenate([m.fibers for m in model.muscles]) if ft else np.zeros((0, 3)),
+            np.repeat(np.arange(len(ft)), [len(t) for t in ft]))
+
+        edges = X0[tets[:, [0, 0, 0, 1, 1, 2]]] - X0[tets[:, [1, 2, 3, 2, 3, 3]]]
+        self.edge_length = float(np.linalg.norm(edges, axis=2).mean())
+        shear = 2 * (self.material.mu10 + self.material.mu01)
+        self.collisions = None
+        if contact:
+            k = contact_stiffness or 50.0 * shear * self.edge_length
+            self.collisions = Collisions(model, ~constrained, k, radius=2.0 * self.edge_length)
+        pairs = self.collisions.coupled_pairs() if self.collisions else None
+        self.pattern = Pattern(dof, tets, pairs)
+        self._solver_name = solver
+        self._solver = None
+        self.refresh_iterations, self.refresh_residual = 10, 1e-3
+        # force scale for the absolute convergence floor: shear x edge^2 per vertex
+        self.force_scale = shear * self.edge_length ** 2
+
+    # -- inputs ---------------------------------------------------------------------------
+    def activation_vector(self, activations):
+        """Validated activations (M,) from a dict name -> a, an array (M,), or None (zeros)."""
+        M = len(self.muscle_names)
+        if activations is None:
+            return np.zeros(M)
+        if isinstance(activations, dict):
+            a = np.zeros(M)
+            index = {n: i for i, n in enumerate(self.muscle_names)}
+            for name, value in activations.items():
+                if name not in index:
+                    raise InvfaceError(f"unknown muscle {name!r}; the model's muscles are: "
+                                       + ", ".join(self.muscle_names))
+                a[index[name]] = _scalar(value, name)
+        else:
+            a = np.asarray(activations, float).reshape(-1)
+            if a.shape != (M,):
+                raise InvfaceError(f"activations: expected {M} values (one per muscle), got {a.size}")
+        for i in np.flatnonzero(~np.isfinite(a)):
+            raise InvfaceError(f"activation of {self.muscle_names[i]} is {a[i]} (must be a number in [0, 1])")
+        for i, m in enumerate(self.model.muscles):
+            lo, hi = m.activation_curve[:, 1].min(), m.activation_curve[:, 1].max()
+            if not (lo - 1e-12 <= a[i] <= hi + 1e-12):
+                raise InvfaceError(f"activation of {m.name} is {a[i]:g}, outside its activation curve's "
+                                   f"range [{lo:g}, {hi:g}]")
+        return a
+
+    def constrained_positions(self, jaw):
+        """Rest positions with the jaw vertices moved by the jaw transform (N,3); jaw (6,)."""
+        jaw = _jaw_vector(jaw)
+        X = self.model.rest_positions.astype(float).copy()
+        M = self.model.jaw_matrix(jaw)
+        j = self.model.fixed_jaw
+        X[j] = X[j] @ M[:3, :3].T + M[:3, 3]
+        return X
+
+    # -- energy -----------------------------------------------------------------------------
+    def _total(self, X, act, contacts, tracks, order, project=False):
+        E, g_nodes, Ke = self.flesh.evaluate(X, act, order, project)
+        E += contacts.energy(X)
+        if tracks is not None:
+            E += tracks.energy(X)
+        if order == 0:
+            return E, None, None
+        g = self.pattern.scatter(g_nodes, self.elements.tets)
+        gv = contacts.gradient(X, self.N)
+        if tracks is not None:
+            np.add.at(gv, tracks.vertices, tracks.gradient(X))
+        g += gv[self.free].reshape(-1)
+        if order == 1:
+            return E, g, None
+        blocks = contacts.blocks(X)
+        if tracks is not None:
+            blocks.append(tracks.blocks())
+        return E, g, self.pattern.assemble(Ke, blocks)
+
+    def energy(self, X, activations=None, tracks=None, contacts=None, order=1):
+        """Total energy (J), free-DOF gradient (n,) and Newton matrix data (upper CSR) at X."""
+        act = self.activation_vector(activations)
+        return self._total(np.asarray(X, float), act, contacts or ContactSet.empty(), tracks, order)
+
+    def _solver_for(self):
+        if self._solver is None:
+            self._solver = linsolve.make_solver(self.pattern, self._solver_name)
+        return self._solver
+
+    # -- Newton -----------------------------------------------------------------------------
+    def solve(self, activations=None, jaw=None, tracks=None, warm=None, rtol=1e-6,
+              max_iter=40, keep_factor=True, raise_on_failure=True, progress=None):
+        """Steady state for muscle activations (dict or (M,)), jaw parameters (6,), optional
+        Tracks (Eq. 5), warm start from a previous SimResult. Returns a SimResult.
+
+        Converged when the free-DOF residual |f| <= rtol * max(|f_0|, force scale), where f_0
+        is the residual at the start (force scale: shear modulus x edge length^2 per DOF).
+        """
+        t_all = time.perf_counter()
+        act = self.activation_vector(activations)
+        jaw = _jaw_vector(jaw)
+        secs = {"assembly": 0.0, "factor": 0.0, "solve": 0.0, "line_search": 0.0}
+        Xc = self.constrained_positions(jaw)
+        jm = self.model.jaw_matrix(jaw)
+        if warm is not None:
+            X = warm.X + self.model.skinned_volume(jaw) - self.model.skinned_volume(warm.jaw)
+        else:
+            X = self.model.skinned_volume(jaw)
+        fixed = self.dof_of_vertex < 0
+        X[fixed] = Xc[fixed]
+        solver = self._solver_for()
+        contacts = self.collisions.detect(X, jm) if self.collisions else ContactSet.empty()
+        residuals, ref = [], None
+        converged, it = False, 0
+        vols = self.elements.volumes(X)
+        n_inv = int((vols <= 0).sum())
+        factored_exact = False
+        while True:
+            t = time.perf_counter()
+            E, g, data = self._total(X, act, contacts, tracks, 2)
+            secs["assembly"] += time.perf_counter() - t
+            r = float(np.linalg.norm(g))
+            if ref is None:
+                ref = max(r, self.force_scale * np.sqrt(len(g)))
+            residuals.append(r / ref)
+            if progress:
+                progress(it, r / ref)
+            if not np.isfinite(r):
+                break
+            if r <= rtol * ref:
+                converged = True
+            if converged or it >= max_iter:
+                break
+            it += 1
+            dx, factored_exact = self._newton_step(solver, X, act, contacts, tracks, data, g, secs)
+            t = time.perf_counter()
+            X, E_new, n_inv = self._line_search(X, dx, E, g, act, contacts, tracks, n_inv)
+            secs["line_search"] += time.perf_counter() - t
+            # contact planes follow X until the solve is close, then stay frozen so the last
+            # iterations solve one smooth problem and converge quadratically
+            if self.collisions and it < self.refresh_iterations and residuals[-1] > self.refresh_residual:
+                contacts = self.collisions.detect(X, jm)
+        if converged and keep_factor:
+            t = time.perf_counter()
+            try:
+                solver.factor(data)
+                factored_exact = True
+            except linsolve.NotSPD:
+                factored_exact = False
+            secs["factor"] += time.perf_counter() - t
+        vols = self.elements.volumes(X) / self.elements.volume
+        res = SimResult(X=X, activations=act, jaw=jaw, converged=converged, iterations=it,
+                        residuals=residuals, energy=float(E), inverted=int((vols <= 0).sum()),
+                        min_J=float(vols.min()), seconds=secs,
+                        solver=solver if (converged and keep_factor and factored_exact) else None,
+                        contacts=contacts, tracks=tracks)
+        if res.solver is not None:
+            self._solver = None      # the result owns this factorisation now
+        secs["total"] = time.perf_counter() - t_all - sum(secs.values())
+        if not converged and raise_on_failure:
+            raise SimulationError(res.report())
+        return res
+
+    def _newton_step(self, solver, X, act, contacts, tracks, data, g, secs):
+        """Newton direction: exact Hessian first, projected when not SPD or not descent."""
+        for project in (False, True):
+            if project:
+                t = time.perf_counter()
+                _, _, data = self._total(X, act, contacts, tracks, 2, project=True)
+                secs["assembly"] += time.perf_counter() - t
+            t = time.perf_counter()
+            try:
+                solver.factor(data)
+            except linsolve.NotSPD:
+                secs["factor"] += time.perf_counter() - t
+                continue
+            secs["factor"] += time.perf_counter() - t
+            t = time.perf_counter()
+            dx = -solver.solve(g)
+            secs["solve"] += time.perf_counter() - t
+            if dx @ g < 0:
+                return dx, not project
+        # even the projected matrix failed (singular): fall back to a scaled gradient step
+        return -g / (np.abs(data[self.pattern.diag_slot]).max() + 1e-30), False
+
+    def _line_search(self, X, dx, E, g, act, contacts, tracks, n_inv):
+        """Backtracking Armijo on the energy; never increases the inverted-tet count."""
+        step = np.zeros_like(X)
+        step[self.free] = dx.reshape(-1, 3)
+        slope = float(dx @ g)
+        alpha = 1.0
+        for _ in range(40):
+            Xn = X + alpha * step
+            vols = self.elements.volumes(Xn)
+            inv = int((vols <= 0).sum())
+            if inv <= n_inv:
+                En, _, _ = self._total(Xn, act, contacts, tracks, 0)
+                if np.isfinite(En) and En <= E + 1e-4 * alpha * slope:
+                    return Xn, En, inv
+            alpha *= 0.5
+        # Near convergence the energy decrease drowns in round-off: accept the full step if
+        # it reduces the residual instead.
+        Xn = X + step
+        inv = int((self.elements.volumes(Xn) <= 0).sum())
+        En, gn, _ = self._total(Xn, act, contacts, tracks, 1)
+        if inv <= n_inv and np.linalg.norm(gn) < np.linalg.norm(g):
+            return Xn, En, inv
+        return X, E, n_inv
+
+    def surface(self, result):
+        """Render-surface vertices (V,3) of a SimResult through the model's embedding."""
+        return self.model.embedded_surface(result.X)
+
+
+def _scalar(value, name):
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise InvfaceError(f"activation of {name} must be a number, got {value!r}") from None
+
+
+def _jaw_vector(jaw):
+    if jaw is None:
+        return np.zeros(6)
+    j = np.asarray(jaw, float).reshape(-1)
+    if j.shape != (6,) or not np.all(np.isfinite(j)):
+        raise InvfaceError(f"jaw parameters must be 6 finite numbers (3 rotations rad, 3 translations m), got {jaw!r}")
+    return j
