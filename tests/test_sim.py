@@ -1,0 +1,228 @@
+"""Quasistatic simulation: material derivatives, FVM kernels, Newton, contacts, bad input."""
+import numpy as np
+import pytest
+
+from invface.errors import InvfaceError, MeshError
+from invface.sim import materials
+from invface.sim.fem import Elements, FleshModel, Pattern
+from invface.sim.quasistatic import Simulator
+from invface.sim.tracks import Tracks, activation_from_length, centerline_length
+
+MAT = materials.Material()
+
+
+def block(nx=3, ny=2, nz=2, size=(0.03, 0.02, 0.02)):
+    """A box of nx*ny*nz cubes, 6 tets each (Kuhn split): X (N,3), tets (T,4)."""
+    g = np.stack(np.meshgrid(*[np.linspace(0, s, n + 1) for s, n in zip(size, (nx, ny, nz))],
+                             indexing="ij"), -1)
+    idx = np.arange(g[..., 0].size).reshape(g.shape[:3])
+    tets = []
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                c = [idx[i + a, j + b, k + d] for a in (0, 1) for b in (0, 1) for d in (0, 1)]
+                for p in ([0, 4, 6, 7], [0, 4, 5, 7], [0, 2, 6, 7], [0, 2, 3, 7], [0, 1, 5, 7], [0, 1, 3, 7]):
+                    tets.append([c[q] for q in p])
+    X, tets = g.reshape(-1, 3), np.array(tets)
+    vol = np.linalg.det(np.transpose(X[tets[:, 1:]] - X[tets[:, :1]], (0, 2, 1)))
+    tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]
+    return X, tets
+
+
+def flesh_block(act=0.0):
+    X, tets = block()
+    el = Elements(X, tets)
+    d = np.tile([1.0, 0, 0], (len(tets), 1))
+    return X, tets, el, FleshModel(el, MAT, np.arange(len(tets)), d, np.zeros(len(tets), int))
+
+
+def test_material_derivatives_match_finite_differences():
+    rng = np.random.default_rng(1)
+    F = np.eye(3) + 0.3 * rng.standard_normal((6, 3, 3))
+    F[0] = np.diag([1.0, 1.0, -0.4])            # inverted element: still smooth and finite
+    d = rng.standard_normal((6, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    a = rng.random(6)
+    for fn in (lambda F, o: materials.isotropic(F, MAT, o), lambda F, o: materials.fibre(F, d, a, MAT, o)):
+        psi, P, H = fn(F, 2)
+        h = 1e-6
+        for k in range(9):
+            E = np.zeros(9)
+            E[k] = h
+            E = E.reshape(3, 3)
+            pp, Pp, _ = fn(F + E, 1)
+            pm, Pm, _ = fn(F - E, 1)
+            assert np.allclose((pp - pm) / (2 * h), P[:, k // 3, k % 3], rtol=1e-5, atol=1e-5 * np.abs(P).max())
+            assert np.allclose(((Pp - Pm) / (2 * h)).reshape(6, 9), H[:, :, k], rtol=1e-5,
+                               atol=1e-5 * np.abs(H).max())
+
+
+def test_forces_and_stiffness_match_finite_differences():
+    X, tets, el, flesh = flesh_block()
+    rng = np.random.default_rng(2)
+    Xd = X + 0.002 * rng.standard_normal(X.shape)
+    dof = np.arange(len(X))
+    pat = Pattern(dof, tets)
+    E, g_nodes, Ke = flesh.evaluate(Xd, [0.6], 2)
+    g = pat.scatter(g_nodes, tets)
+    K = pat.matrix(pat.assemble(Ke), full=True)
+    v = rng.standard_normal(g.size)
+    h = 1e-7
+    Ep, gp, _ = flesh.evaluate(Xd + h * v.reshape(-1, 3), [0.6], 1)
+    Em, gm, _ = flesh.evaluate(Xd - h * v.reshape(-1, 3), [0.6], 1)
+    assert abs((Ep - Em) / (2 * h) - g @ v) <= 1e-5 * abs(g @ v)
+    dg = (pat.scatter(gp, tets) - pat.scatter(gm, tets)) / (2 * h)
+    assert np.linalg.norm(dg - K @ v) <= 1e-5 * np.linalg.norm(K @ v)
+
+
+def test_rest_state_has_zero_force_and_patch_test():
+    X, tets, el, flesh = flesh_block()
+    _, g0, _ = flesh.evaluate(X, [0.0], 1)
+    assert np.abs(g0).max() < 1e-12
+    # affine deformation: uniform stress, interior nodes force-free, same P in every tet
+    A = np.array([[1.1, 0.05, 0.0], [0.02, 0.95, 0.03], [0.0, -0.04, 1.02]])
+    Xa = X @ A.T + [0.01, -0.02, 0.005]
+    F = el.deformation_gradient(Xa)
+    assert np.allclose(F, A, atol=1e-12)
+    _, g_nodes, _ = flesh.evaluate(Xa, [0.3], 1)
+    f = Pattern(np.arange(len(X)), tets).scatter(g_nodes, tets).reshape(-1, 3)
+    interior = np.all((X > 1e-9) & (X < np.array([0.03, 0.02, 0.02]) - 1e-9), axis=1)
+    assert interior.any()
+    assert np.abs(f[interior]).max() < 1e-9 * np.abs(f).max()
+
+
+def test_uniaxial_fibre_stretch_matches_closed_form():
+    """F = diag(l, s, s), fibres along x: FVM reaction on the x = L face equals P11 * area."""
+    X, tets, el, flesh = flesh_block()
+    lam, s, a = 1.15, 0.94, 0.7
+    m = MAT
+    c = 2 * m.mu10 + 4 * m.mu01
+    J = lam * s * s
+    u = lam - 1
+    fp = m.passive_p1 * (np.exp(m.passive_p2 * u) - 1)
+    fa = np.exp(-(u / m.active_width) ** 2)
+    P11 = (2 * m.mu10 * lam + 2 * m.mu01 * lam * 2 * s * s + (m.kappa * (J - 1) - c) * s * s
+           + m.sigma_max * (fp + a * fa))
+    Xd = X * [lam, s, s]
+    _, g_nodes, _ = flesh.evaluate(Xd, [a], 1)
+    f = Pattern(np.arange(len(X)), tets).scatter(g_nodes, tets).reshape(-1, 3)
+    face = np.isclose(X[:, 0], 0.03)
+    area = 0.02 * 0.02
+    assert np.isclose(f[face, 0].sum() / area, P11, rtol=1e-10)
+
+
+def test_psd_projection_and_tracks():
+    rng = np.random.default_rng(3)
+    H = rng.standard_normal((5, 9, 9))
+    H = H + H.transpose(0, 2, 1)
+    Hp = materials.project_psd(H)
+    assert np.linalg.eigvalsh(Hp).min() > -1e-10
+    w_full = np.linalg.eigvalsh(H)
+    assert np.allclose(np.linalg.eigvalsh(Hp), np.maximum(w_full, 0), atol=1e-10)
+    tr = Tracks([0, 2], [[0, 0, 0], [1, 1, 1]], 5.0)
+    X = rng.standard_normal((3, 3))
+    assert np.isclose(tr.energy(X), 2.5 * (np.sum(X[0] ** 2) + np.sum((X[2] - 1) ** 2)))
+    assert np.allclose(tr.gradient(X), 5.0 * (X[[0, 2]] - [[0, 0, 0], [1, 1, 1]]))
+
+
+def test_centerline_length_and_activation_curve(small_model):
+    mus = small_model.muscles[0]
+    L, dL = centerline_length(mus.centerline)
+    assert np.isclose(L, mus.rest_length)
+    C = mus.centerline + 1e-3 * np.random.default_rng(4).standard_normal(mus.centerline.shape)
+    L1, dL1 = centerline_length(C)
+    dC = np.random.default_rng(5).standard_normal(C.shape)
+    h = 1e-7
+    assert np.isclose((centerline_length(C + h * dC)[0] - centerline_length(C - h * dC)[0]) / (2 * h),
+                      np.sum(dL1 * dC), rtol=1e-6)
+    a, da = activation_from_length(mus, 0.75 * L)
+    assert np.isclose(a, 0.5) and np.isclose(da, -2.0 / L)
+    assert activation_from_length(mus, 1.2 * L)[0] == 0.0
+
+
+@pytest.fixture(scope="module")
+def sim(small_model):
+    return Simulator(small_model)
+
+
+def test_rest_pose_is_equilibrium(sim):
+    r = sim.solve()
+    assert r.converged and r.iterations == 0
+    assert np.abs(r.X - sim.model.rest_positions).max() < 1e-12
+
+
+def test_newton_converges_quadratically_on_smile(sim):
+    acts = {n: 0.6 for n in sim.muscle_names if n.startswith("zygomaticus_major")}
+    r = sim.solve(acts)
+    assert r.converged and r.inverted == 0
+    res = np.array(r.residuals)
+    # the last steps: r_{k+1} <= C r_k^2 (quadratic) and far faster than linear
+    assert res[-1] < 1e-6 and res[-1] < 1e-2 * res[-2]
+    # smile: the mouth corners move up and out
+    x0 = sim.model.neutral[sim.model.landmarks["mouth_corner_L"]]
+    x1 = sim.surface(r)[sim.model.landmarks["mouth_corner_L"]]
+    assert x1[1] - x0[1] > 0.002 and x1[0] - x0[0] > 0.001
+    # quasi-incompressible flesh: total volume within 1 %
+    v0 = sim.elements.volume.sum()
+    assert abs(sim.elements.volumes(r.X).sum() / v0 - 1) < 0.01
+    # warm start: fewer iterations than cold
+    r2 = sim.solve({k: 0.65 for k in acts}, warm=r)
+    assert r2.converged and r2.iterations < r.iterations
+    # the factorisation at the solution is kept for adjoint solves
+    assert r.solver is not None and np.all(np.isfinite(r.solver.solve(np.ones(sim.pattern.n))))
+
+
+def test_jaw_open_keeps_tets_positive_and_lips_apart(sim):
+    r = sim.solve(jaw=[0.2, 0, 0, 0, 0, 0])
+    assert r.converged and r.inverted == 0 and r.min_J > 0.2
+    m = sim.model
+    x = sim.surface(r)
+    up, lo = m.curves["lip_inner_upper"], m.curves["lip_inner_lower"]
+    assert x[up, 1].mean() - x[lo, 1].mean() > 0.01
+
+
+def test_contacts_push_back_penetration(sim):
+    from invface.sim.collisions import ContactSet
+    X = sim.model.rest_positions
+    c = sim.collisions.detect(X)
+    assert len(c.v) > 0 and np.all(c.gaps(X) > -1e-9)
+    # move one contact vertex into its plane: positive penalty energy, gradient along -n
+    Xp = X.copy()
+    Xp[c.v[0]] -= (c.gaps(X)[0] + 1e-3) * c.n[0]
+    g = c.gradient(Xp, len(X))
+    assert c.energy(Xp) > 0 and g[c.v[0]] @ c.n[0] < 0
+    # gradient and Hessian blocks match finite differences
+    rng = np.random.default_rng(6)
+    Xr = X + 1e-3 * rng.standard_normal(X.shape)
+    dX = rng.standard_normal(X.shape)
+    h = 1e-8
+    fd = (c.energy(Xr + h * dX) - c.energy(Xr - h * dX)) / (2 * h)
+    assert np.isclose(fd, np.sum(c.gradient(Xr, len(X)) * dX), rtol=1e-5)
+    assert isinstance(ContactSet.empty().energy(X), float)
+
+
+def test_bad_activation_input(sim):
+    with pytest.raises(InvfaceError, match="NaN|nan"):
+        sim.solve({sim.muscle_names[0]: float("nan")})
+    with pytest.raises(InvfaceError, match="outside"):
+        sim.solve({sim.muscle_names[0]: 1.5})
+    with pytest.raises(InvfaceError, match="unknown muscle"):
+        sim.solve({"no_such_muscle": 0.5})
+    with pytest.raises(InvfaceError, match="jaw"):
+        sim.solve(jaw=[0, 0])
+
+
+def test_bad_rest_mesh(small_model):
+    import copy
+    bad = copy.copy(small_model)
+    tets = small_model.tets.copy()
+    tets[0] = tets[0][[0, 2, 1, 3]]
+    bad.tets = tets
+    with pytest.raises(MeshError, match="inverted"):
+        Simulator(bad)
+    nm = copy.copy(small_model)
+    t0 = small_model.tets[0]
+    apex = np.setdiff1d(np.arange(len(small_model.rest_positions)), small_model.tets[:3].ravel())[:2]
+    nm.tets = np.concatenate([small_model.tets, [[t0[0], t0[1], t0[2], apex[0]], [t0[0], t0[1], t0[2], apex[1]]]])
+    with pytest.raises(MeshError, match="non-manifold"):
+        Simulator(nm)
