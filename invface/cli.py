@@ -49,6 +49,93 @@ def cmd_build_model(args):
     return 0
 
 
+def _load_model(path, resolution):
+    from . import template
+    from .model import FaceModel
+    if path:
+        return FaceModel.load(path)
+    return template.build(resolution=resolution, progress=_progress)
+
+
+def _read_activations(path):
+    """{muscle: activation} and optional jaw (6,) from a JSON file {"activations": {...}, "jaw": [...]}
+    (a plain {muscle: value} mapping is accepted too)."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise InvfaceError(f"{path}: no such file") from None
+    except (OSError, ValueError) as e:
+        raise InvfaceError(f"{path}: not a readable JSON file ({e})") from None
+    if not isinstance(data, dict):
+        raise InvfaceError(f"{path}: expected a JSON object of muscle activations")
+    acts = data.get("activations", {k: v for k, v in data.items() if k != "jaw"})
+    if not isinstance(acts, dict):
+        raise InvfaceError(f"{path}: 'activations' must be an object {{muscle name: value}}")
+    return acts, data.get("jaw")
+
+
+def cmd_simulate(args):
+    """Pose the model by muscle activations (and jaw), report the solve, render a preview."""
+    import numpy as np
+
+    from .sim.quasistatic import Simulator
+    acts, jaw = _read_activations(args.activations) if args.activations else ({}, None)
+    for item in args.set or []:
+        name, _, value = item.partition("=")
+        acts[name] = value
+    if args.jaw is not None:
+        jaw = [args.jaw, 0, 0, 0, 0, 0]
+    model = _load_model(args.model, args.resolution)
+    sim = Simulator(model)
+    res = sim.solve(acts, jaw=jaw, progress=lambda i, r: print(f"  .. Newton {i}: relative residual {r:.2e}", flush=True))
+    print(res.report())
+    x = sim.surface(res)
+    d = np.linalg.norm(x - model.neutral, axis=1)
+    dv = sim.elements.volumes(res.X).sum() / sim.elements.volume.sum() - 1
+    print(f"skin displacement: max {d.max() * 1000:.2f} mm, mean {d.mean() * 1000:.2f} mm; "
+          f"flesh volume change {dv * 100:+.3f} %")
+    if args.output:
+        _save_mesh(args.output, x, model.triangles)
+        print(f"wrote {args.output}")
+    if args.preview:
+        _write_pose_preview(model, x, args.preview)
+        print(f"wrote {args.preview}")
+    return 0
+
+
+def _save_mesh(path, vertices, faces):
+    import os
+
+    import trimesh
+    path = Path(path)
+    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
+    trimesh.Trimesh(vertices, faces, process=False).export(tmp)
+    os.replace(tmp, path)
+
+
+def _write_pose_preview(model, x, path):
+    import os
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from .render.preview import look_at_camera, render_meshes, to_srgb8
+    from .report.preview import SKIN, VIEWS
+    tiles = []
+    for verts in (model.neutral, x):
+        for eye in VIEWS.values():
+            cam = look_at_camera(np.array(eye), (0.0, 0.0, 0.06), fov=19, width=400, height=400, spp=16)
+            tiles.append(to_srgb8(render_meshes([(verts, model.triangles, SKIN)], cam)))
+    img = np.concatenate([np.concatenate(tiles[:2], 1), np.concatenate(tiles[2:], 1)], 0)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp.png")
+    plt.imsave(tmp, img)
+    os.replace(tmp, path)
+
+
 def cmd_demo(args):
     """Until fitting lands: build the template, pose the jaw, write previews."""
     from . import template
@@ -60,6 +147,9 @@ def cmd_demo(args):
     _print_summary(model, time.perf_counter() - t0)
     model.save(out / "template_head.npz")
     paths = write_previews(model, out / "preview")
+    if model.blendshape_names:
+        from .report.expressions import write_expression_sheet
+        print(f"expression contact sheet: {write_expression_sheet(model, out / 'expressions.png')}")
     (out / "summary.json").write_text(json.dumps(model.summary(), indent=2))
     print(f"wrote {out / 'template_head.npz'}, {len(paths)} preview images; open {paths[-1]}")
     return 0
@@ -77,6 +167,15 @@ def build_parser():
     b.add_argument("-o", "--output", help="write the bundle here (.npz)")
     b.add_argument("--preview", metavar="DIR", help="write preview images into DIR")
     b.set_defaults(func=cmd_build_model)
+    s = sub.add_parser("simulate", help="pose the model by muscle activations (quasistatic simulation)")
+    s.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
+    s.add_argument("--resolution", type=float, default=1.0, help="template size factor when no --model")
+    s.add_argument("--activations", help='JSON file: {"activations": {"zygomaticus_major_L": 0.8, ...}, "jaw": [6]}')
+    s.add_argument("--set", action="append", metavar="MUSCLE=A", help="set one activation (repeatable)")
+    s.add_argument("--jaw", type=float, help="jaw opening angle (rad) about the hinge")
+    s.add_argument("-o", "--output", help="write the posed skin mesh (OBJ/PLY)")
+    s.add_argument("--preview", help="write a PNG: neutral (top) and posed (bottom), front and 3/4")
+    s.set_defaults(func=cmd_simulate)
     d = sub.add_parser("demo", help="run the main job on the built-in model")
     d.add_argument("--out", default="reports/demo", help="output folder")
     d.set_defaults(func=cmd_demo)

@@ -16,14 +16,20 @@ SMALL_RESOLUTION = 0.3
 
 @pytest.fixture(scope="session")
 def small_model():
-    """The template at a small resolution (~10k tets), built once per test session."""
+    """The template at a small resolution (~10k tets), anatomy only, built once per session."""
+    return invface.template.build(resolution=SMALL_RESOLUTION, expressions=False)
+
+
+@pytest.fixture(scope="session")
+def small_expressive_model():
+    """The small template with its simulated expression blendshapes."""
     return invface.template.build(resolution=SMALL_RESOLUTION)
 
 
 @pytest.fixture(scope="session")
 def default_model():
     """The default-size template (cached between sessions in tests/.cache)."""
-    return invface.template.build(resolution=1.0)
+    return invface.template.build(resolution=1.0, expressions=False)
 
 
 def load_ict_neutral():

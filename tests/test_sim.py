@@ -226,3 +226,58 @@ def test_bad_rest_mesh(small_model):
     nm.tets = np.concatenate([small_model.tets, [[t0[0], t0[1], t0[2], apex[0]], [t0[0], t0[1], t0[2], apex[1]]]])
     with pytest.raises(MeshError, match="non-manifold"):
         Simulator(nm)
+
+
+REQUIRED_UNITS = ["browInnerUp_L", "browInnerUp_R", "browOuterUp_L", "browOuterUp_R", "browDown", "cheekRaise",
+                  "noseWrinkle", "upperLipRaise", "lipCornerPull_L", "lipCornerPull_R", "dimpler",
+                  "lipCornerDepress_L", "lipCornerDepress_R", "lowerLipDepress", "chinRaise", "lipPucker",
+                  "lipFunnel", "lipStretch", "lipPress", "lipsPart", "jawOpen"]
+
+
+def test_template_expression_blendshapes(small_expressive_model):
+    m = small_expressive_model
+    assert all(u in m.blendshape_names for u in REQUIRED_UNITS)
+    K = len(m.blendshape_names)
+    assert m.blendshapes.shape == (K, len(m.neutral), 3)
+    assert m.blendshape_activations.shape == (K, len(m.muscles))
+    stats = m.meta["blendshape_sims"]
+    for name in m.blendshape_names:
+        assert np.linalg.norm(m.blendshapes[m.blendshape_names.index(name)], axis=1).max() > 5e-4, name
+        assert abs(stats[name]["volume_change"]) < 0.01, name
+
+    def moved(name, landmark):
+        k = m.blendshape_names.index(name)
+        return m.blendshapes[k][m.landmarks[landmark]]
+
+    # smile L lifts the left mouth corner more than the right one
+    assert moved("lipCornerPull_L", "mouth_corner_L")[1] > 0.001
+    assert moved("lipCornerPull_L", "mouth_corner_L")[1] > 3 * abs(moved("lipCornerPull_L", "mouth_corner_R")[1])
+    # the depressor pulls the corner down, the brow raiser lifts the brow
+    assert moved("lipCornerDepress_R", "mouth_corner_R")[1] < -0.0005
+    # (the forehead flesh is thin and bound to the cranium, so brows move little: see issue 3 note)
+    assert moved("browInnerUp_L", "brow_L")[1] > 1e-4
+    # lips part and jaw open separate the inner lips (with the paired jaw)
+    from invface.report.expressions import blendshape_pose
+    for name in ("lipsPart", "jawOpen"):
+        x = m.surface(blendshape_pose(m, name))
+        gap = x[m.curves["lip_inner_upper"], 1].mean() - x[m.curves["lip_inner_lower"], 1].mean()
+        assert gap > 0.004, name
+
+
+def test_cli_simulate(small_expressive_model, tmp_path, capsys):
+    from invface.cli import main
+    m = small_expressive_model
+    path = tmp_path / "m.npz"
+    m.save(path)
+    acts = tmp_path / "smile.json"
+    acts.write_text('{"activations": {"zygomaticus_major_L": 0.7}, "jaw": [0.05, 0, 0, 0, 0, 0]}')
+    rc = main(["simulate", "--model", str(path), "--activations", str(acts), "-o", str(tmp_path / "x.obj"),
+               "--preview", str(tmp_path / "p.png")])
+    out = capsys.readouterr().out
+    assert rc == 0 and "converged" in out and (tmp_path / "x.obj").exists() and (tmp_path / "p.png").exists()
+    assert main(["simulate", "--model", str(path), "--set", "zygomaticus_major_L=nan"]) == 2
+    assert "zygomaticus_major_L" in capsys.readouterr().err
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    assert main(["simulate", "--model", str(path), "--activations", str(bad)]) == 2
+    assert "bad.json" in capsys.readouterr().err

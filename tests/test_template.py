@@ -10,7 +10,7 @@ from invface.template.shape import skin_field
 PAPER_001_LANDMARKS = ["top_of_head", "nose_bridge", "nose_tip", "subnasale", "stomion", "chin", "neck_start",
                        "head_extreme_L", "head_extreme_R", "eye_inner_L", "eye_inner_R", "eye_outer_L",
                        "eye_outer_R", "mouth_corner_L", "mouth_corner_R", "alar_L", "alar_R"]
-REQUIRED_MUSCLES = ["frontalis", "corrugator_supercilii", "procerus", "orbicularis_oculi",
+REQUIRED_MUSCLES = ["frontalis_medialis", "frontalis_lateralis", "corrugator_supercilii", "procerus", "orbicularis_oculi",
                     "levator_labii_superioris", "levator_labii_superioris_alaeque_nasi", "zygomaticus_major",
                     "zygomaticus_minor", "levator_anguli_oris", "risorius", "buccinator", "orbicularis_oris",
                     "depressor_anguli_oris", "depressor_labii_inferioris", "mentalis", "masseter", "nasalis",

@@ -58,8 +58,11 @@ def _regions(P):
     return np.where(lips | band, 2, np.where(jaw, 1, 0)), jaw.astype(int)
 
 
-def generate(resolution=1.0, progress=None):
-    """Build the template FaceModel. resolution scales the tet count (~35k at 1, ~350k at 10)."""
+def generate(resolution=1.0, progress=None, expressions=True):
+    """Build the template FaceModel. resolution scales the tet count (~35k at 1, ~350k at 10).
+
+    expressions: simulate the FACS-style expression blendshapes (template.expressions).
+    """
     say = progress or (lambda msg: None)
     t0 = time.perf_counter()
     n_alpha, n_beta, n_layers, factor = sizes(resolution)
@@ -124,6 +127,10 @@ def generate(resolution=1.0, progress=None):
               "render_subdivision": factor, "build_seconds": round(time.perf_counter() - t0, 2),
               "quality": q},
     )
+    if expressions:
+        from .expressions import simulate_blendshapes
+        simulate_blendshapes(model, progress=say)
+        model.meta["build_seconds"] = round(time.perf_counter() - t0, 2)
     return model
 
 
@@ -135,19 +142,27 @@ def cache_dir() -> Path:
     return Path(base) / "invface"
 
 
-def cache_path(resolution=1.0) -> Path:
+def cache_path(resolution=1.0, expressions=True) -> Path:
     """Cache file keyed on generator version and options (and this module's source)."""
-    src = b"".join(p.read_bytes() for p in sorted(Path(__file__).parent.glob("*.py")))
-    key = hashlib.sha1(src + f"{GENERATOR_VERSION}:{float(resolution):.6g}".encode()).hexdigest()[:12]
-    return cache_dir() / f"template-r{float(resolution):g}-{key}.npz"
+    pkg = Path(__file__).parent.parent
+    files = sorted(Path(__file__).parent.glob("*.py"))
+    if expressions:     # the blendshapes depend on the simulator too
+        files += sorted((pkg / "sim").glob("*.py"))
+    src = b"".join(p.read_bytes() for p in files)
+    key = hashlib.sha1(src + f"{GENERATOR_VERSION}:{float(resolution):.6g}:{expressions}".encode()).hexdigest()[:12]
+    kind = "" if expressions else "-noexpr"
+    return cache_dir() / f"template-r{float(resolution):g}{kind}-{key}.npz"
 
 
-def build(resolution=1.0, force=False, cache=True, progress=None) -> FaceModel:
-    """The built-in head as a FaceModel (cached). ``force`` regenerates it."""
-    path = cache_path(resolution)
+def build(resolution=1.0, force=False, cache=True, progress=None, expressions=True) -> FaceModel:
+    """The built-in head as a FaceModel (cached). ``force`` regenerates it.
+
+    expressions=False skips the simulated expression blendshapes (anatomy only, fast).
+    """
+    path = cache_path(resolution, expressions)
     if cache and path.exists() and not force:
         return FaceModel.load(path)
-    model = generate(resolution, progress=progress)
+    model = generate(resolution, progress=progress, expressions=expressions)
     if cache:
         try:
             model.save(path)

@@ -16,7 +16,8 @@ from .shape import skin_field
 
 # name: (side 'pair' or 'M', points [(x, y, t)], radius m, closed ring?)
 MUSCLES = {
-    "frontalis": ("pair", [(0.030, 0.118, 0.55), (0.030, 0.092, 0.45), (0.030, 0.064, 0.2)], 0.016, False),
+    "frontalis_medialis": ("pair", [(0.016, 0.118, 0.55), (0.016, 0.092, 0.45), (0.016, 0.064, 0.2)], 0.010, False),
+    "frontalis_lateralis": ("pair", [(0.044, 0.116, 0.55), (0.044, 0.090, 0.45), (0.044, 0.063, 0.2)], 0.011, False),
     "corrugator_supercilii": ("pair", [(0.008, 0.050, 0.9), (0.018, 0.056, 0.5), (0.030, 0.059, 0.2)], 0.0055, False),
     "procerus": ("M", [(0.0, 0.028, 0.9), (0.0, 0.042, 0.5), (0.0, 0.056, 0.2)], 0.0065, False),
     "orbicularis_oculi": ("pair", "ring:0.031,0.034,0.025,0.020,0.35", 0.0075, True),

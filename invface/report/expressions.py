@@ -1,0 +1,47 @@
+"""Contact sheet of a FaceModel's expression blendshapes (front and 3/4 views, labelled)."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..render.preview import look_at_camera, render_meshes, to_srgb8
+from .preview import SKIN, VIEWS
+
+
+def blendshape_pose(model, name):
+    """Controls that show blendshape ``name`` as simulated: weight 1 and its paired jaw."""
+    jaw = model.meta.get("blendshape_jaw", {}).get(name, [0.0] * 6)
+    return {"weights": {name: 1.0}, "jaw": jaw}
+
+
+def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None):
+    """Render neutral + every blendshape (front and 3/4) into one labelled PNG; returns path."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = ["neutral"] + list(model.blendshape_names)
+    cams = [look_at_camera(np.array(eye), (0.0, 0.0, 0.06), fov=19, width=size, height=size, spp=spp)
+            for eye in VIEWS.values()]
+    rows = int(np.ceil(len(names) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(cols * 3.2, rows * 1.75), dpi=100)
+    for ax in np.ravel(axes):
+        ax.axis("off")
+    for i, name in enumerate(names):
+        if progress:
+            progress(f"render {name}")
+        x = model.neutral if name == "neutral" else model.surface(blendshape_pose(model, name))
+        tiles = [to_srgb8(render_meshes([(x, model.triangles, SKIN)], cam)) for cam in cams]
+        ax = np.ravel(axes)[i]
+        ax.imshow(np.concatenate(tiles, 1))
+        ax.set_title(name, fontsize=9)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp)
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path

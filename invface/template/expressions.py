@@ -1,0 +1,92 @@
+"""The template's expression blendshapes, simulated from muscle activations (paper 000 Sec. 4).
+
+Each FACS-style action unit is a set of muscle activations (and, for jaw open, a jaw
+rotation). It is simulated with the quasistatic muscle model, the render skin is read off
+the flesh through the embedding, and the blendshape delta is the pre-skinning displacement:
+for shapes with a jaw rotation the jaw's linear blend skinning is undone per vertex, so that
+Eq. 1 with the same jaw parameters and weight 1 reproduces the simulated skin exactly.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+# name: ({muscle base name: activation}, sides, jaw (6,) or None)
+# sides 'L'/'R' activate only that side of paired muscles, 'LR' both; midline muscles always.
+ACTION_UNITS = {
+    "browInnerUp_L": ({"frontalis_medialis": 0.8}, "L", None),                       # AU1
+    "browInnerUp_R": ({"frontalis_medialis": 0.8}, "R", None),
+    "browOuterUp_L": ({"frontalis_lateralis": 0.8}, "L", None),                      # AU2
+    "browOuterUp_R": ({"frontalis_lateralis": 0.8}, "R", None),
+    "browDown": ({"corrugator_supercilii": 0.8, "procerus": 0.7}, "LR", None),        # AU4
+    "cheekRaise": ({"orbicularis_oculi": 0.5, "zygomaticus_minor": 0.3}, "LR", None),  # AU6
+    "noseWrinkle": ({"levator_labii_superioris_alaeque_nasi": 0.8, "nasalis": 0.6,
+                     "procerus": 0.5}, "LR", None),                                     # AU9
+    "upperLipRaise": ({"levator_labii_superioris": 0.8}, "LR", None),                # AU10
+    "lipCornerPull_L": ({"zygomaticus_major": 0.8}, "L", None),                       # AU12
+    "lipCornerPull_R": ({"zygomaticus_major": 0.8}, "R", None),
+    "dimpler": ({"buccinator": 0.8}, "LR", None),                                    # AU14
+    "lipCornerDepress_L": ({"depressor_anguli_oris": 0.8}, "L", None),                # AU15
+    "lipCornerDepress_R": ({"depressor_anguli_oris": 0.8}, "R", None),
+    "lowerLipDepress": ({"depressor_labii_inferioris": 0.8}, "LR", None),             # AU16
+    "chinRaise": ({"mentalis": 0.8}, "LR", None),                                    # AU17
+    "lipPucker": ({"orbicularis_oris": 0.7}, "LR", None),                            # AU18
+    "lipStretch": ({"risorius": 0.8, "platysma": 0.5}, "LR", None),                  # AU20
+    "lipFunnel": ({"orbicularis_oris": 0.45, "levator_labii_superioris": 0.3,
+                   "depressor_labii_inferioris": 0.3}, "LR", None),                    # AU22
+    "lipPress": ({"orbicularis_oris": 0.5, "mentalis": 0.3}, "LR", None),             # AU24
+    "lipsPart": ({"depressor_labii_inferioris": 0.5, "levator_labii_superioris": 0.4},
+                 "LR", [0.03, 0, 0, 0, 0, 0]),                                         # AU25
+    "jawOpen": ({}, "LR", [0.22, 0, 0, 0, 0, 0]),                                     # AU26/27
+}
+
+
+def activations_for(unit, muscles):
+    """Activation vector (M,) for action-unit spec (acts, sides, jaw) over ``muscles``."""
+    acts, sides, _ = unit
+    a = np.zeros(len(muscles))
+    for i, m in enumerate(muscles):
+        base = m.name[:-2] if m.side in ("L", "R") else m.name
+        if base in acts and (m.side == "M" or m.side in sides):
+            a[i] = acts[base]
+    return a
+
+
+def unskin(x, weights, M):
+    """Invert linear blend skinning per vertex: p with (1-w) p + w (R p + t) = x; x (V,3)."""
+    R, t = M[:3, :3], M[:3, 3]
+    A = (1 - weights)[:, None, None] * np.eye(3) + weights[:, None, None] * R
+    return np.linalg.solve(A, (x - weights[:, None] * t)[..., None])[..., 0]
+
+
+def simulate_blendshapes(model, units=None, progress=None):
+    """Simulate the action units on ``model`` and store them as its blendshapes (in place).
+
+    Sets blendshape_names, blendshapes (K,V,3), blendshape_activations (K,M) and
+    meta['blendshape_jaw'] (jaw parameters paired with each shape). Returns the model.
+    """
+    from ..sim.quasistatic import Simulator
+
+    units = units or ACTION_UNITS
+    sim = Simulator(model)
+    names, deltas, acts, jaws, stats = [], [], [], [], {}
+    items = list(units.items())
+    for i, (name, unit) in enumerate(items):
+        if progress:
+            progress(f"expression {i + 1}/{len(items)}: {name}")
+        a = activations_for(unit, model.muscles)
+        jaw = np.zeros(6) if unit[2] is None else np.asarray(unit[2], float)
+        res = sim.solve(a, jaw=jaw, keep_factor=False)
+        x = model.embedded_surface(res.X)
+        pre = unskin(x, model.jaw_weights, model.jaw_matrix(jaw)) if np.any(jaw) else x
+        names.append(name)
+        deltas.append(pre - model.neutral)
+        acts.append(a)
+        jaws.append(jaw.tolist())
+        stats[name] = {"iterations": res.iterations, "seconds": round(sum(res.seconds.values()), 2),
+                       "volume_change": float(sim.elements.volumes(res.X).sum() / sim.elements.volume.sum() - 1),
+                       "max_displacement_mm": float(np.linalg.norm(x - model.neutral, axis=1).max() * 1000)}
+    model.blendshape_names = names
+    model.blendshapes = np.array(deltas)
+    model.blendshape_activations = np.array(acts)
+    model.meta = {**model.meta, "blendshape_jaw": dict(zip(names, jaws)), "blendshape_sims": stats}
+    return model
