@@ -93,17 +93,6 @@ class FleshModel:
             H = materials.project_psd(H)
         return E, grad, el.node_stiffness(H)
 
-    def active_forces(self, X):
-        """Energy-gradient contribution per unit activation, per (tet, muscle) pair (Q,4,3).
-
-        The fibre energy is linear in a (Eq. 4), so this is d grad / d a_m for pair q's muscle.
-        """
-        F = self.el.deformation_gradient(X)[self.ftets]
-        one = np.ones(len(self.ftets))
-        _, P1, _ = materials.fibre(F, self.fdirs, one, self.mat, 1)
-        _, P0, _ = materials.fibre(F, self.fdirs, 0 * one, self.mat, 1)
-        return np.einsum("t,tij,tnj->tni", self.el.volume[self.ftets], P1 - P0, self.el.G[self.ftets])
-
 
 class Pattern:
     """Upper-triangular CSR sparsity pattern over free DOFs, built once and reused.

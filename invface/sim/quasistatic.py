@@ -223,7 +223,6 @@ class Simulator:
         converged, it = False, 0
         vols = self.elements.volumes(X)
         n_inv = int((vols <= 0).sum())
-        factored_exact = False
         while True:
             t = time.perf_counter()
             E, g, data = self._total(X, act, contacts, tracks, 2)
@@ -241,14 +240,15 @@ class Simulator:
             if converged or it >= max_iter:
                 break
             it += 1
-            dx, factored_exact = self._newton_step(solver, X, act, contacts, tracks, data, g, secs)
+            dx = self._newton_step(solver, X, act, contacts, tracks, data, g, secs)
             t = time.perf_counter()
-            X, E_new, n_inv = self._line_search(X, dx, E, g, act, contacts, tracks, n_inv)
+            X, _, n_inv = self._line_search(X, dx, E, g, act, contacts, tracks, n_inv)
             secs["line_search"] += time.perf_counter() - t
             # contact planes follow X until the solve is close, then stay frozen so the last
             # iterations solve one smooth problem and converge quadratically
             if self.collisions and it < self.refresh_iterations and residuals[-1] > self.refresh_residual:
                 contacts = self.collisions.detect(X, jm)
+        factored_exact = False
         if converged and keep_factor:
             t = time.perf_counter()
             try:
@@ -288,9 +288,9 @@ class Simulator:
             dx = -solver.solve(g)
             secs["solve"] += time.perf_counter() - t
             if dx @ g < 0:
-                return dx, not project
+                return dx
         # even the projected matrix failed (singular): fall back to a scaled gradient step
-        return -g / (np.abs(data[self.pattern.diag_slot]).max() + 1e-30), False
+        return -g / (np.abs(data[self.pattern.diag_slot]).max() + 1e-30)
 
     def _line_search(self, X, dx, E, g, act, contacts, tracks, n_inv):
         """Backtracking Armijo on the energy; never increases the inverted-tet count."""
