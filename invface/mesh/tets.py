@@ -67,13 +67,18 @@ def quality_summary(X, tets):
     }
 
 
+def face_use(tets):
+    """All tet faces (4T,3), outward for positive tets, and how many tets share each (4T,)."""
+    faces = tets[:, _FACES].reshape(-1, 3)
+    _, inv, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
+    return faces, counts[inv.ravel()]
+
+
 def boundary_faces(tets):
     """Outward-oriented triangles (B,3) that belong to exactly one tet, and their tet ids (B,)."""
-    faces = tets[:, _FACES].reshape(-1, 3)
+    faces, use = face_use(tets)
     owner = np.repeat(np.arange(len(tets)), 4)
-    key = np.sort(faces, axis=1)
-    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    once = counts[inv.ravel()] == 1
+    once = use == 1
     return faces[once], owner[once]
 
 

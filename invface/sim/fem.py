@@ -11,6 +11,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MeshError
+from ..mesh.tets import shape_gradients, signed_volumes
 from . import materials
 
 
@@ -20,18 +21,14 @@ class Elements:
     def __init__(self, X0, tets):
         X0 = np.asarray(X0, float)
         tets = np.asarray(tets, np.int64)
-        Dm = np.transpose(X0[tets[:, 1:]] - X0[tets[:, :1]], (0, 2, 1))    # columns x_k - x_0
-        vol = np.linalg.det(Dm) / 6.0
         if len(tets) == 0:
             raise MeshError("the flesh mesh has no tets")
+        vol = signed_volumes(X0, tets)
         bad = np.flatnonzero(~(vol > 1e-18))
         if len(bad):
             raise MeshError(f"the rest flesh mesh has {len(bad)} inverted or degenerate tets "
                             f"(first: tet {bad[0]}, volume {vol[bad[0]]:.3g} m^3); rebuild the model")
-        Bm = np.linalg.inv(Dm)
-        G = np.empty((len(tets), 4, 3))
-        G[:, 1:] = Bm
-        G[:, 0] = -Bm.sum(1)
+        G, _ = shape_gradients(X0, tets)
         self.X0, self.tets, self.volume, self.G = X0, tets, vol, G
 
     def deformation_gradient(self, X):
@@ -106,6 +103,7 @@ class Pattern:
         self.n = 3 * int(self.dof_of_vertex.max() + 1)
         vd = self.dof_of_vertex[tets]                                     # (T,4)
         edof = np.where(vd[:, :, None] >= 0, 3 * vd[:, :, None] + np.arange(3), -1).reshape(-1, 12)
+        self.elem_dofs = edof
         r = np.repeat(edof, 12, axis=1).reshape(-1)
         c = np.tile(edof, (1, 12)).reshape(-1)
         keep = (r >= 0) & (c >= 0) & (r <= c)
@@ -168,11 +166,8 @@ class Pattern:
             return U
         return (U + U.T - sp.diags(U.diagonal())).tocsr()
 
-    def scatter(self, grad_nodes, tets):
-        """Free-DOF vector (n,) from per-tet node vectors (T,4,3)."""
-        out = np.zeros(self.n)
-        vd = self.dof_of_vertex[tets]
-        dofs = np.where(vd[:, :, None] >= 0, 3 * vd[:, :, None] + np.arange(3), -1).reshape(-1)
+    def scatter(self, grad_nodes):
+        """Free-DOF vector (n,) from per-tet node vectors (T,4,3) of the pattern's tets."""
+        dofs = self.elem_dofs.reshape(-1)
         m = dofs >= 0
-        out += np.bincount(dofs[m], grad_nodes.reshape(-1)[m], minlength=self.n)
-        return out
+        return np.bincount(dofs[m], grad_nodes.reshape(-1)[m], minlength=self.n)

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InvfaceError, MeshError
+from ..mesh.tets import face_use
 from . import linsolve
 from .collisions import Collisions, ContactSet
 from .fem import Elements, FleshModel, Pattern
@@ -69,11 +70,10 @@ class SimResult:
 
 
 def _check_manifold(tets):
-    faces = np.sort(tets[:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]].reshape(-1, 3), axis=1)
-    _, counts = np.unique(faces, axis=0, return_counts=True)
-    if np.any(counts > 2):
-        raise MeshError(f"the flesh tet mesh is non-manifold: {int((counts > 2).sum())} triangles are "
-                        "shared by more than two tets")
+    _, use = face_use(tets)
+    if np.any(use > 2):
+        n = int(round(np.sum(1.0 / use[use > 2])))     # each such triangle appears `use` times
+        raise MeshError(f"the flesh tet mesh is non-manifold: {n} triangles are shared by more than two tets")
     if len(np.unique(np.sort(tets, axis=1), axis=0)) != len(tets):
         raise MeshError("the flesh tet mesh has duplicated tets")
 
@@ -174,7 +174,7 @@ class Simulator:
             E += tracks.energy(X)
         if order == 0:
             return E, None, None
-        g = self.pattern.scatter(g_nodes, self.elements.tets)
+        g = self.pattern.scatter(g_nodes)
         gv = contacts.gradient(X, self.N)
         if tracks is not None:
             np.add.at(gv, tracks.vertices, tracks.gradient(X))
