@@ -91,7 +91,7 @@ def cmd_simulate(args):
     print(res.report())
     x = sim.surface(res)
     d = np.linalg.norm(x - model.neutral, axis=1)
-    dv = sim.elements.volumes(res.X).sum() / sim.elements.volume.sum() - 1
+    dv = sim.volume_change(res)
     print(f"skin displacement: max {d.max() * 1000:.2f} mm, mean {d.mean() * 1000:.2f} mm; "
           f"flesh volume change {dv * 100:+.3f} %")
     if args.output:
@@ -121,14 +121,8 @@ def _write_pose_preview(model, x, path):
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from .render.preview import look_at_camera, render_meshes, to_srgb8
-    from .report.preview import SKIN, VIEWS
-    tiles = []
-    for verts in (model.neutral, x):
-        for eye in VIEWS.values():
-            cam = look_at_camera(np.array(eye), (0.0, 0.0, 0.06), fov=19, width=400, height=400, spp=16)
-            tiles.append(to_srgb8(render_meshes([(verts, model.triangles, SKIN)], cam)))
-    img = np.concatenate([np.concatenate(tiles[:2], 1), np.concatenate(tiles[2:], 1)], 0)
+    from .report.expressions import view_tiles
+    img = np.concatenate([np.concatenate(view_tiles(model, v, 400, 16), 1) for v in (model.neutral, x)], 0)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + ".tmp.png")

@@ -1,6 +1,7 @@
 """Quasistatic simulation: material derivatives, FVM kernels, Newton, contacts, bad input."""
 import numpy as np
 import pytest
+from meshes import box_tets
 
 from invface.errors import InvfaceError, MeshError
 from invface.sim import materials
@@ -11,26 +12,8 @@ from invface.sim.tracks import Tracks, activation_from_length, centerline_length
 MAT = materials.Material()
 
 
-def block(nx=3, ny=2, nz=2, size=(0.03, 0.02, 0.02)):
-    """A box of nx*ny*nz cubes, 6 tets each (Kuhn split): X (N,3), tets (T,4)."""
-    g = np.stack(np.meshgrid(*[np.linspace(0, s, n + 1) for s, n in zip(size, (nx, ny, nz))],
-                             indexing="ij"), -1)
-    idx = np.arange(g[..., 0].size).reshape(g.shape[:3])
-    tets = []
-    for i in range(nx):
-        for j in range(ny):
-            for k in range(nz):
-                c = [idx[i + a, j + b, k + d] for a in (0, 1) for b in (0, 1) for d in (0, 1)]
-                for p in ([0, 4, 6, 7], [0, 4, 5, 7], [0, 2, 6, 7], [0, 2, 3, 7], [0, 1, 5, 7], [0, 1, 3, 7]):
-                    tets.append([c[q] for q in p])
-    X, tets = g.reshape(-1, 3), np.array(tets)
-    vol = np.linalg.det(np.transpose(X[tets[:, 1:]] - X[tets[:, :1]], (0, 2, 1)))
-    tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]
-    return X, tets
-
-
-def flesh_block(act=0.0):
-    X, tets = block()
+def flesh_block():
+    X, tets = box_tets((3, 2, 2), (0.03, 0.02, 0.02))
     el = Elements(X, tets)
     d = np.tile([1.0, 0, 0], (len(tets), 1))
     return X, tets, el, FleshModel(el, MAT, np.arange(len(tets)), d, np.zeros(len(tets), int))

@@ -16,6 +16,13 @@ def blendshape_pose(model, name):
     return {"weights": {name: 1.0}, "jaw": jaw}
 
 
+def view_tiles(model, x, size=256, spp=8):
+    """Renders (one per VIEWS entry, front then 3/4) of surface positions x (V,3), sRGB uint8."""
+    cams = [look_at_camera(np.array(eye), (0.0, 0.0, 0.06), fov=19, width=size, height=size, spp=spp)
+            for eye in VIEWS.values()]
+    return [to_srgb8(render_meshes([(x, model.triangles, SKIN)], cam)) for cam in cams]
+
+
 def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None):
     """Render neutral + every blendshape (front and 3/4) into one labelled PNG; returns path."""
     import matplotlib
@@ -23,8 +30,6 @@ def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None):
     import matplotlib.pyplot as plt
 
     names = ["neutral"] + list(model.blendshape_names)
-    cams = [look_at_camera(np.array(eye), (0.0, 0.0, 0.06), fov=19, width=size, height=size, spp=spp)
-            for eye in VIEWS.values()]
     rows = int(np.ceil(len(names) / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(cols * 3.2, rows * 1.75), dpi=100)
     for ax in np.ravel(axes):
@@ -33,9 +38,8 @@ def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None):
         if progress:
             progress(f"render {name}")
         x = model.neutral if name == "neutral" else model.surface(blendshape_pose(model, name))
-        tiles = [to_srgb8(render_meshes([(x, model.triangles, SKIN)], cam)) for cam in cams]
         ax = np.ravel(axes)[i]
-        ax.imshow(np.concatenate(tiles, 1))
+        ax.imshow(np.concatenate(view_tiles(model, x, size, spp), 1))
         ax.set_title(name, fontsize=9)
     fig.tight_layout()
     path = Path(path)

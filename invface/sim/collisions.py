@@ -186,7 +186,7 @@ class Collisions:
                 self.bones.append((bone, moves, near[ok]))
         # the weighted planes of curved surfaces may cut a rest vertex slightly: measure
         # gaps from the rest gap where that is negative, so the rest state is contact-free
-        self.offset = np.zeros(0)
+        self.offset = 0.0
         self.offset = np.minimum(self.detect(X0).gaps(X0), 0.0)
 
     def coupled_pairs(self):
@@ -213,8 +213,7 @@ class Collisions:
         if not parts:
             return ContactSet.empty()
         v, p0, n, u, w = (np.concatenate(z) for z in zip(*parts))
-        if len(self.offset) == len(v):
-            p0 = p0 + self.offset[:, None] * n
+        p0 = p0 + np.reshape(self.offset, (-1, 1)) * n
         return ContactSet(v, p0, n, np.full(len(v), self.stiffness), u, w)
 
 

@@ -248,24 +248,22 @@ class Simulator:
             # iterations solve one smooth problem and converge quadratically
             if self.collisions and it < self.refresh_iterations and residuals[-1] > self.refresh_residual:
                 contacts = self.collisions.detect(X, jm)
-        factored_exact = False
+        kept = None
         if converged and keep_factor:
             t = time.perf_counter()
             try:
                 solver.factor(data)
-                factored_exact = True
+                kept = solver
+                self._solver = None      # the result owns this factorisation now
             except linsolve.NotSPD:
-                factored_exact = False
+                pass
             secs["factor"] += time.perf_counter() - t
         vols = self.elements.volumes(X) / self.elements.volume
         res = SimResult(X=X, activations=act, jaw=jaw, converged=converged, iterations=it,
                         residuals=residuals, energy=float(E), inverted=int((vols <= 0).sum()),
                         min_J=float(vols.min()), seconds=secs,
-                        solver=solver if (converged and keep_factor and factored_exact) else None,
-                        contacts=contacts, tracks=tracks)
-        if res.solver is not None:
-            self._solver = None      # the result owns this factorisation now
-        secs["total"] = time.perf_counter() - t_all - sum(secs.values())
+                        solver=kept, contacts=contacts, tracks=tracks)
+        secs["other"] = time.perf_counter() - t_all - sum(secs.values())
         if not converged and raise_on_failure:
             raise SimulationError(res.report())
         return res
@@ -315,6 +313,10 @@ class Simulator:
         if inv <= n_inv and np.linalg.norm(gn) < np.linalg.norm(g):
             return Xn, En, inv
         return X, E, n_inv
+
+    def volume_change(self, result):
+        """Relative change of the total flesh volume of a SimResult (dimensionless)."""
+        return float(self.elements.volumes(result.X).sum() / self.elements.volume.sum() - 1)
 
     def surface(self, result):
         """Render-surface vertices (V,3) of a SimResult through the model's embedding."""

@@ -36,24 +36,6 @@ def activation_from_length(muscle, length):
     return a, np.where(inside, slopes[k], 0.0) / L0
 
 
-def muscle_vertices(model, free_mask):
-    """Per muscle: the free flesh vertices interior to it and their lumped volume shares.
-
-    Returns [(vertex ids (n,), volume share (n,) m^3), ...] in model.muscles order.
-    """
-    X, tets = model.rest_positions, model.tets
-    vol = np.abs(np.linalg.det(np.transpose(X[tets[:, 1:]] - X[tets[:, :1]], (0, 2, 1)))) / 6
-    out = []
-    for m in model.muscles:
-        v = tets[m.tets].reshape(-1)
-        share = np.repeat(vol[m.tets] / 4, 4)
-        ids, inv = np.unique(v, return_inverse=True)
-        w = np.bincount(inv, share)
-        keep = free_mask[ids]
-        out.append((ids[keep], w[keep]))
-    return out
-
-
 @dataclass
 class Tracks:
     """Zero-length springs: vertices (n,) flesh ids, targets (n,3) m, stiffness (n,) N/m."""

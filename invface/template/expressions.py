@@ -83,7 +83,7 @@ def simulate_blendshapes(model, units=None, progress=None):
         acts.append(a)
         jaws.append(jaw.tolist())
         stats[name] = {"iterations": res.iterations, "seconds": round(sum(res.seconds.values()), 2),
-                       "volume_change": float(sim.elements.volumes(res.X).sum() / sim.elements.volume.sum() - 1),
+                       "volume_change": sim.volume_change(res),
                        "max_displacement_mm": float(np.linalg.norm(x - model.neutral, axis=1).max() * 1000)}
     model.blendshape_names = names
     model.blendshapes = np.array(deltas)
