@@ -1,14 +1,20 @@
 """Collision penalty forces (paper 000 Eq. 3): flesh against flesh (lip on lip, lid on lid)
 and flesh against bone (lips and cheeks against the teeth/jaw proxy).
 
-Each contact is a vertex v and a plane (point p, unit normal n) on the other side; its
-penalty energy is  e = k/2 min(0, n . (x_v - p))^2  (zero when separated), so the force
-pushes v back along n. The plane is a Gaussian-weighted average of the nearby partner
+Each contact is a vertex v and a plane (point p, unit normal n) on the other side; with the
+penetration s = -n . (x_v - p) its penalty energy is k/2 s^2 (zero when separated), made C2
+at first touch by a cubic over the first ``CONTACT_SMOOTHING`` metres of penetration:
+
+    e(s) = 0 (s <= 0),  k s^3 / (6 d) (0 < s < d),  k/2 s^2 - k d/2 s + k d^2/6 (s >= d),
+
+so the force -e'(s) n pushes v back along n, its Jacobian is continuous (Newton keeps its
+quadratic convergence when a contact starts or stops touching) and the tangent/adjoint
+derivatives are those of a smooth function. The plane is a Gaussian-weighted average of the nearby partner
 vertices and their normals (the facing lip or lid, or the cranium/jaw mesh moved with the
 jaw), so it moves continuously with X and contacts do not flicker between partners.
 
 Contact detection (``detect``) runs once per Newton iteration and freezes the planes;
-energy, gradient and Hessian (k n n^T per penetrating vertex) are exact for that frozen set,
+energy, gradient and Hessian (e''(s) n n^T per penetrating vertex) are exact for that frozen set,
 which keeps the line search consistent, and at a converged state the frozen planes are the
 current ones. Both sides of a flesh-flesh contact carry their own contact against the other
 side's plane, so the forces are equal and opposite to first order. The plane's dependence on
@@ -28,6 +34,18 @@ from scipy.spatial import cKDTree
 
 from ..mesh.tets import boundary_faces
 
+CONTACT_SMOOTHING = 2e-5     # m: the cubic onset of the contact penalty
+
+
+def penalty(gap, k, d=CONTACT_SMOOTHING):
+    """C2 penalty of gaps (c,) with stiffness k (c,): energy e, de/dgap, d2e/dgap2 (each (c,))."""
+    s = np.maximum(-gap, 0.0)
+    cubic = s < d
+    e = np.where(cubic, k * s ** 3 / (6 * d), k * (0.5 * s ** 2 - 0.5 * d * s + d * d / 6))
+    de = -np.where(cubic, k * s ** 2 / (2 * d), k * (s - 0.5 * d))
+    dde = np.where(cubic, k * s / d, k)
+    return e, de, dde
+
 
 def vertex_normals(X, faces, n_vertices):
     """Area-weighted unit vertex normals (N,3) of triangles faces (F,3) at positions X."""
@@ -42,25 +60,64 @@ def vertex_normals(X, faces, n_vertices):
 class ContactSet:
     """Frozen contacts: vertices v (c,), unit normals n (c,3), stiffness k (c,) N/m, and the
     plane point p(X) = p0 + sum_j w_j x_{u_j}: static part p0 (c,3), partner vertices u
-    (c,K) (-1 = none) with frozen weights w (c,K). Bone contacts have no partners."""
+    (c,K) (-1 = none) with frozen weights w (c,K). Bone contacts have no partners.
+
+    Planes on the jaw move rigidly with it: ``moves`` (c,) marks them and p_local, n_local
+    (c,3) hold them in the jaw's rest frame, so ``posed`` re-places them for another jaw
+    transform and ``jaw_derivative`` differentiates the forces with respect to it."""
     v: np.ndarray
     p0: np.ndarray
     n: np.ndarray
     k: np.ndarray
     u: np.ndarray
     w: np.ndarray
+    moves: np.ndarray = None
+    p_local: np.ndarray = None
+    n_local: np.ndarray = None
+
+    def __post_init__(self):
+        if self.moves is None:
+            self.moves = np.zeros(len(self.v), bool)
+            self.p_local, self.n_local = self.p0.copy(), self.n.copy()
+
+    def posed(self, M):
+        """The same contacts with the jaw planes placed by the jaw transform M (4,4)."""
+        p0, n = self.p0.copy(), self.n.copy()
+        m = self.moves
+        p0[m] = self.p_local[m] @ M[:3, :3].T + M[:3, 3]
+        n[m] = self.n_local[m] @ M[:3, :3].T
+        return ContactSet(self.v, p0, n, self.k, self.u, self.w, m, self.p_local, self.n_local)
+
+    def jaw_derivative(self, X, dM, n_vertices):
+        """d(energy gradient)/d(jaw parameter) (P,N,3) for jaw-transform derivatives dM (P,4,4).
+
+        Only the penetrating jaw contacts contribute: with gap = n.(x - p0), the gradient
+        e'(gap) n changes by e'' dgap n + e' dn, dn = dR n_local, dp0 = dR p_local + dt.
+        """
+        out = np.zeros((len(dM), n_vertices, 3))
+        gap = self.gaps(X)
+        m = self.moves & (gap < 0)
+        if not m.any():
+            return out
+        x, n, p0 = X[self.v[m]], self.n[m], self.p0[m]
+        _, de, dde = penalty(gap[m], self.k[m])
+        for i, D in enumerate(dM):
+            dn = self.n_local[m] @ D[:3, :3].T
+            dp = self.p_local[m] @ D[:3, :3].T + D[:3, 3]
+            dgap = np.einsum("ci,ci->c", dn, x - p0) - np.einsum("ci,ci->c", n, dp)
+            np.add.at(out[i], self.v[m], (dde * dgap)[:, None] * n + de[:, None] * dn)
+        return out
 
     def gaps(self, X):
         p = self.p0 + np.einsum("ck,cki->ci", self.w, X[np.maximum(self.u, 0)])
         return np.einsum("ci,ci->c", self.n, X[self.v] - p)
 
     def energy(self, X):
-        g = np.minimum(self.gaps(X), 0.0)
-        return 0.5 * float(self.k @ g ** 2)
+        return float(penalty(self.gaps(X), self.k)[0].sum())
 
     def gradient(self, X, n_vertices):
         """Energy gradient (N,3) (= minus the collision forces)."""
-        f = (self.k * np.minimum(self.gaps(X), 0.0))[:, None] * self.n
+        f = penalty(self.gaps(X), self.k)[1][:, None] * self.n
         out = np.zeros((n_vertices, 3))
         np.add.at(out, self.v, f)
         m = self.u >= 0
@@ -69,9 +126,11 @@ class ContactSet:
 
     def blocks(self, X):
         """Hessian blocks [(pairs (P,2), B (P,3,3))] of the penetrating contacts:
-        k n n^T (e_v - sum_j w_j e_uj)(e_v - sum_j w_j e_uj)^T."""
-        pen = self.gaps(X) < 0
-        v, n, k, u, w = self.v[pen], self.n[pen], self.k[pen], self.u[pen], self.w[pen]
+        e''(s) n n^T (e_v - sum_j w_j e_uj)(e_v - sum_j w_j e_uj)^T."""
+        gap = self.gaps(X)
+        pen = gap < 0
+        k = penalty(gap[pen], self.k[pen])[2]
+        v, n, u, w = self.v[pen], self.n[pen], self.u[pen], self.w[pen]
         nn = k[:, None, None] * np.einsum("ci,cj->cij", n, n)
         ids = np.concatenate([v[:, None], u], axis=1)                 # (c, 1+K)
         coef = np.concatenate([np.ones((len(v), 1)), -w], axis=1)
@@ -206,15 +265,21 @@ class Collisions:
             valid = self.partners >= 0
             P = np.where(valid[..., None], X[self.partners], np.nan)
             _, n, w = weighted_planes(X[self.self_vertices], P, nrm[self.partners], 0.5 * self.radius)
-            parts.append((self.self_vertices, np.zeros_like(n), n, self.partners, w))
+            parts.append((self.self_vertices, np.zeros_like(n), n, self.partners, w, False))
         for bone, moves, near in self.bones:
             p, n = bone.planes(X[near], jaw_matrix if moves else None)
-            parts.append((near, p + self.bone_gap * n, n, np.full((len(near), K), -1), np.zeros((len(near), K))))
+            parts.append((near, p + self.bone_gap * n, n, np.full((len(near), K), -1), np.zeros((len(near), K)),
+                          moves))
         if not parts:
             return ContactSet.empty()
-        v, p0, n, u, w = (np.concatenate(z) for z in zip(*parts))
+        v, p0, n, u, w = (np.concatenate(z) for z in list(zip(*parts))[:5])
+        moving = np.concatenate([np.full(len(z[0]), z[5]) for z in parts])
         p0 = p0 + np.reshape(self.offset, (-1, 1)) * n
-        return ContactSet(v, p0, n, np.full(len(v), self.stiffness), u, w)
+        M = np.eye(4) if jaw_matrix is None else jaw_matrix
+        p_local, n_local = p0.copy(), n.copy()
+        p_local[moving] = (p0[moving] - M[:3, 3]) @ M[:3, :3]
+        n_local[moving] = n[moving] @ M[:3, :3]
+        return ContactSet(v, p0, n, np.full(len(v), self.stiffness), u, w, moving, p_local, n_local)
 
 
 def _share_tet(tets, n_vertices, pairs):

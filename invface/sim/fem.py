@@ -3,10 +3,12 @@
 Forces follow the finite-volume method of Teran et al. 2003: the force on node n of a tet is
 f_n = -P b_n with b_n the area-weighted normal share of n's incident faces. For linear tets
 b_n = V grad(N_n), so f_n = -V P G_n with G (T,4,3) the constant shape-function gradients;
-this is the form computed here (one einsum over all tets, no element loop).
+this is the form computed here, by one fused numba kernel running in parallel over the tets
+(deformation gradient, stress, projected or exact stiffness and the 12x12 element matrix).
 """
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 import scipy.sparse as sp
 
@@ -29,7 +31,7 @@ class Elements:
             raise MeshError(f"the rest flesh mesh has {len(bad)} inverted or degenerate tets "
                             f"(first: tet {bad[0]}, volume {vol[bad[0]]:.3g} m^3); rebuild the model")
         G, _ = shape_gradients(X0, tets)
-        self.X0, self.tets, self.volume, self.G = X0, tets, vol, G
+        self.X0, self.tets, self.volume, self.G = X0, tets, vol, np.ascontiguousarray(G, float)
 
     def deformation_gradient(self, X):
         """F (T,3,3) for positions X (N,3)."""
@@ -39,18 +41,48 @@ class Elements:
         """Signed deformed volumes (T,) m^3."""
         return self.volume * np.linalg.det(self.deformation_gradient(X))
 
-    def node_forces(self, P, weight=None):
-        """Energy gradient per tet node (T,4,3) from stresses P (T,3,3): V P G_n (= -f_n)."""
-        w = self.volume if weight is None else self.volume * weight
-        return np.einsum("t,tij,tnj->tni", w, P, self.G)
 
-    def node_stiffness(self, H, tet_ids=None):
-        """Element stiffness (T,12,12) from dP/dF blocks H (T,9,9), node-major (n, i)."""
-        G = self.G if tet_ids is None else self.G[tet_ids]
-        V = self.volume if tet_ids is None else self.volume[tet_ids]
-        T = len(H)
-        K = np.einsum("t,tijab,tnj,tmb->tnima", V, H.reshape(T, 3, 3, 3, 3), G, G, optimize=True)
-        return K.reshape(T, 12, 12)
+@nb.njit(parallel=True, **materials.JIT)
+def _flesh_kernel(X, tets, G, vol, fptr, fdir, fact, prm, order, project, psi, grad, Ke):
+    """Fused FVM kernel over all tets: energy V Psi (T,), node gradients V P G_n (T,4,3) and
+    element stiffness V G^T dP/dF G (T,12,12), node-major (n, i)."""
+    for t in nb.prange(tets.shape[0]):
+        F = np.zeros((3, 3))
+        for n in range(4):
+            x = X[tets[t, n]]
+            for i in range(3):
+                for j in range(3):
+                    F[i, j] += x[i] * G[t, n, j]
+        P = np.zeros((3, 3))
+        H = np.zeros((9, 9))
+        e = materials.iso_element(F, prm, order, P, H)
+        for q in range(fptr[t], fptr[t + 1]):
+            e += materials.fibre_element(F, fdir[q], fact[q], prm, order, P, H)
+        V = vol[t]
+        psi[t] = V * e
+        if order == 0:
+            continue
+        for n in range(4):
+            for i in range(3):
+                grad[t, n, i] = V * (P[i, 0] * G[t, n, 0] + P[i, 1] * G[t, n, 1] + P[i, 2] * G[t, n, 2])
+        if order == 1:
+            continue
+        if project:
+            materials.project_element(H, 0.0)
+        HG = np.zeros((3, 3, 4, 3))            # HG[i, j, m, a] = sum_b H[ij, ab] G[m, b]
+        for i in range(3):
+            for j in range(3):
+                for m in range(4):
+                    for a in range(3):
+                        r = 3 * i + j
+                        HG[i, j, m, a] = (H[r, 3 * a] * G[t, m, 0] + H[r, 3 * a + 1] * G[t, m, 1]
+                                          + H[r, 3 * a + 2] * G[t, m, 2])
+        for n in range(4):
+            for i in range(3):
+                for m in range(4):
+                    for a in range(3):
+                        Ke[t, 3 * n + i, 3 * m + a] = V * (G[t, n, 0] * HG[i, 0, m, a] + G[t, n, 1] * HG[i, 1, m, a]
+                                                           + G[t, n, 2] * HG[i, 2, m, a])
 
 
 class FleshModel:
@@ -63,9 +95,25 @@ class FleshModel:
     def __init__(self, elements: Elements, material: materials.Material,
                  fibre_tets, fibre_dirs, fibre_muscle):
         self.el, self.mat = elements, material
-        self.ftets = np.asarray(fibre_tets, np.int64)
-        self.fdirs = np.asarray(fibre_dirs, float)
-        self.fmus = np.asarray(fibre_muscle, np.int64)
+        ftets = np.asarray(fibre_tets, np.int64)
+        order = np.argsort(ftets, kind="stable")           # fibre entries grouped by tet
+        self.fdirs = np.ascontiguousarray(np.asarray(fibre_dirs, float).reshape(-1, 3)[order])
+        self.fmus = np.asarray(fibre_muscle, np.int64)[order]
+        self.ftets = ftets[order]
+        self.fptr = np.searchsorted(self.ftets, np.arange(len(elements.tets) + 1))
+        self.prm = material.params()
+
+    def active_forces(self, X):
+        """d(energy gradient)/d(activation) per fibre entry (Q,4,3): the active forces of Eq. 4
+        (with a minus sign), V sigma_max f_a(lam) (d lam/dF) G_n, in the order of ``fmus``."""
+        el = self.el
+        F = el.deformation_gradient(X)[self.ftets]
+        Fd = np.einsum("qij,qj->qi", F, self.fdirs)
+        lam = np.maximum(np.linalg.norm(Fd, axis=1), 1e-12)
+        w = self.mat.active_width
+        s = el.volume[self.ftets] * self.mat.sigma_max * np.exp(-((lam - 1) / w) ** 2) / lam
+        # (d lam/dF) G_n = (F d)(d . G_n) / lam
+        return s[:, None, None] * np.einsum("qi,qn->qni", Fd, np.einsum("qj,qnj->qn", self.fdirs, el.G[self.ftets]))
 
     def evaluate(self, X, act, order=2, project=False):
         """Energy (J), gradient (T,4,3) and element stiffness (T,12,12) at positions X (N,3).
@@ -74,21 +122,15 @@ class FleshModel:
         applies the per-element definiteness fix to dP/dF.
         """
         el = self.el
-        F = el.deformation_gradient(X)
-        psi, P, H = materials.isotropic(F, self.mat, order)
-        a = np.asarray(act, float)[self.fmus]
-        fpsi, fP, fH = materials.fibre(F[self.ftets], self.fdirs, a, self.mat, order)
-        E = float(el.volume @ psi + el.volume[self.ftets] @ fpsi)
-        if order == 0:
-            return E, None, None
-        np.add.at(P, self.ftets, fP)
-        grad = el.node_forces(P)
-        if order == 1:
-            return E, grad, None
-        np.add.at(H, self.ftets, fH)
-        if project:
-            H = materials.project_psd(H)
-        return E, grad, el.node_stiffness(H)
+        T = len(el.tets)
+        psi = np.empty(T)
+        grad = np.empty((T, 4, 3)) if order >= 1 else np.empty((1, 4, 3))
+        Ke = np.empty((T, 12, 12)) if order == 2 else np.empty((1, 12, 12))
+        a = np.asarray(act, float)[self.fmus] if len(self.fmus) else np.zeros(0)
+        _flesh_kernel(np.ascontiguousarray(X, float), el.tets, el.G, el.volume, self.fptr, self.fdirs,
+                      a, self.prm, order, project, psi, grad, Ke)
+        E = float(psi.sum())
+        return E, (grad if order >= 1 else None), (Ke if order == 2 else None)
 
 
 class Pattern:

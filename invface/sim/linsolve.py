@@ -13,6 +13,7 @@ INVFACE_SOLVER=pardiso|superlu forces one.
 from __future__ import annotations
 
 import ctypes
+import functools
 import os
 
 import numpy as np
@@ -25,15 +26,22 @@ class NotSPD(InvfaceError):
     """The matrix handed to factor() is not positive definite."""
 
 
+@functools.cache
+def _pardiso_function():
+    """MKL's pardiso entry point, located once per process (pypardiso globs for the library,
+    which takes about a second)."""
+    try:
+        from pypardiso.pardiso_wrapper import PyPardisoSolver
+    except ImportError as e:    # pragma: no cover - depends on the install
+        raise DependencyError("pypardiso is not installed (pip install pypardiso)") from e
+    return PyPardisoSolver().libmkl.pardiso
+
+
 class PardisoSolver:
     name = "pardiso"
 
     def __init__(self, pattern):
-        try:
-            from pypardiso.pardiso_wrapper import PyPardisoSolver
-        except ImportError as e:    # pragma: no cover - depends on the install
-            raise DependencyError("pypardiso is not installed (pip install pypardiso)") from e
-        self._lib = PyPardisoSolver().libmkl.pardiso
+        self._lib = _pardiso_function()
         self.n = pattern.n
         self._ia = (pattern.indptr + 1).astype(np.int32)
         self._ja = (pattern.indices + 1).astype(np.int32)

@@ -21,20 +21,20 @@ the energy itself (as in Smith et al. 2018, "Stable Neo-Hookean flesh"), which k
 Teran et al. is the per-element projection of dP/dF onto its non-negative eigenspace
 (``project_psd``), used when the exact Newton matrix is not positive definite.
 
-All kernels take whole arrays: F (T,3,3) and return (T,), (T,3,3), (T,9,9) in SI units (Pa).
-Index convention for 9-vectors: F[i, j] -> 3 i + j.
+The per-element kernels are numba functions (``iso_element``, ``fibre_element``,
+``project_element``) that the fused FVM kernel in ``fem.py`` calls for every tet in parallel;
+``isotropic``, ``fibre`` and ``project_psd`` apply them to whole arrays: F (T,3,3) -> (T,),
+(T,3,3), (T,9,9) in SI units (Pa). Index convention for 9-vectors: F[i, j] -> 3 i + j.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
+import numba as nb
 import numpy as np
-from scipy.special import erf
 
-_EPS = np.zeros((3, 3, 3))
-_EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
-_EPS[0, 2, 1] = _EPS[2, 1, 0] = _EPS[1, 0, 2] = -1.0
-_I3 = np.eye(3)
+JIT = dict(cache=True, nogil=True, fastmath=False)
 
 
 @dataclass(frozen=True)
@@ -56,104 +56,183 @@ class Material:
     def as_dict(self):
         return asdict(self)
 
-
-def invariants(F):
-    """I1, I2, J (each (T,)) of F (T,3,3)."""
-    C = np.einsum("tki,tkj->tij", F, F)
-    I1 = np.einsum("tii->t", C)
-    I2 = 0.5 * (I1 ** 2 - np.einsum("tij,tji->t", C, C))
-    return I1, I2, np.linalg.det(F)
+    def params(self):
+        """The constants as the float64 array (7,) the kernels take, in field order."""
+        return np.array([self.mu10, self.mu01, self.kappa, self.sigma_max,
+                         self.passive_p1, self.passive_p2, self.active_width])
 
 
-def cofactor(F):
-    """Cofactor matrix dJ/dF (T,3,3): its columns are c1 x c2, c2 x c0, c0 x c1 for F's columns c."""
-    c = np.transpose(F, (0, 2, 1))
-    return np.stack([np.cross(c[:, 1], c[:, 2]), np.cross(c[:, 2], c[:, 0]),
-                     np.cross(c[:, 0], c[:, 1])], axis=2)
+@nb.njit(**JIT)
+def _eps(i, j, k):
+    """Levi-Civita symbol."""
+    return (i - j) * (j - k) * (k - i) / 2
 
 
-# non-zero Levi-Civita entries (i, a, m, sign): d2 J / dF_ij dF_ab = eps_iam eps_jbn F_mn
-_LC = [(i, a, m, _EPS[i, a, m]) for i in range(3) for a in range(3) for m in range(3) if _EPS[i, a, m]]
+@nb.njit(**JIT)
+def iso_element(F, prm, order, P, H):
+    """Mooney-Rivlin + quasi-incompressibility of one element. F (3,3); prm Material.params().
+
+    Returns psi; adds the stress to P (3,3) when order >= 1 and dP/dF to H (9,9) when order 2.
+    """
+    mu10, mu01, kappa = prm[0], prm[1], prm[2]
+    C = F.T @ F
+    I1 = C[0, 0] + C[1, 1] + C[2, 2]
+    I2 = 0.5 * (I1 * I1 - np.sum(C * C))
+    cof = np.empty((3, 3))
+    for j in range(3):                     # columns of cof: c1 x c2, c2 x c0, c0 x c1
+        j1, j2 = (j + 1) % 3, (j + 2) % 3
+        cof[0, j] = F[1, j1] * F[2, j2] - F[2, j1] * F[1, j2]
+        cof[1, j] = F[2, j1] * F[0, j2] - F[0, j1] * F[2, j2]
+        cof[2, j] = F[0, j1] * F[1, j2] - F[1, j1] * F[0, j2]
+    J = F[0, 0] * cof[0, 0] + F[1, 0] * cof[1, 0] + F[2, 0] * cof[2, 0]
+    c = 2 * mu10 + 4 * mu01
+    psi = mu10 * (I1 - 3) + mu01 * (I2 - 3) - c * (J - 1) + 0.5 * kappa * (J - 1) ** 2
+    if order == 0:
+        return psi
+    sJ = kappa * (J - 1) - c
+    FC = F @ C
+    for i in range(3):
+        for j in range(3):
+            P[i, j] += 2 * mu10 * F[i, j] + mu01 * (2 * I1 * F[i, j] - 2 * FC[i, j]) + sJ * cof[i, j]
+    if order == 1:
+        return psi
+    B = F @ F.T
+    # d2 I2 / dF_ij dF_ab = 2 [2 F_ij F_ab + I1 d_ia d_jb - d_ia C_bj - F_ib F_aj - B_ia d_jb];
+    # d2 J / dF_ij dF_ab = eps_iak eps_jbn F_kn
+    for i in range(3):
+        for j in range(3):
+            for a in range(3):
+                for b in range(3):
+                    h = 2 * mu01 * (2 * F[i, j] * F[a, b] - F[i, b] * F[a, j]) + kappa * cof[i, j] * cof[a, b]
+                    if i == a:
+                        h += 2 * mu01 * (I1 * (j == b) - C[j, b]) + 2 * mu10 * (j == b)
+                    if j == b:
+                        h -= 2 * mu01 * B[i, a]
+                    if i != a and j != b:
+                        k, n = 3 - i - a, 3 - j - b
+                        h += sJ * _eps(i, a, k) * _eps(j, b, n) * F[k, n]
+                    H[3 * i + j, 3 * a + b] += h
+    return psi
 
 
-def _skew(v):
-    """Cross-product matrices [v]x (T,3,3) of vectors v (T,3)."""
-    z = np.zeros(len(v))
-    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1),
-                     np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
+@nb.njit(**JIT)
+def fibre_curves(lam, a, prm):
+    """Fibre energy per unit volume and its first two derivatives in the stretch lam."""
+    s, p1, p2, w = prm[3], prm[4], prm[5], prm[6]
+    u = lam - 1.0
+    g = math.exp(-(u / w) ** 2)
+    psi = a * 0.5 * math.sqrt(math.pi) * w * math.erf(u / w)
+    d1, d2 = a * g, -a * 2 * u / w ** 2 * g
+    if u > 0:
+        e = math.exp(p2 * u)
+        psi += p1 * ((e - 1) / p2 - u)
+        d1 += p1 * (e - 1)
+        d2 += p1 * p2 * e
+    return s * psi, s * d1, s * d2
+
+
+@nb.njit(**JIT)
+def fibre_element(F, d, a, prm, order, P, H):
+    """Fibre term of one element for the unit rest fibre d (3,) at activation a (Eq. 4).
+
+    Returns psi; adds the stress to P and dP/dF to H as ``iso_element``.
+    """
+    Fd = F @ d
+    lam = max(math.sqrt(Fd[0] ** 2 + Fd[1] ** 2 + Fd[2] ** 2), 1e-12)
+    psi, dpsi, ddpsi = fibre_curves(lam, a, prm)
+    if order == 0:
+        return psi
+    g = np.empty(9)                                        # d lam / dF
+    for i in range(3):
+        for j in range(3):
+            g[3 * i + j] = Fd[i] * d[j] / lam
+            P[i, j] += dpsi * g[3 * i + j]
+    if order == 1:
+        return psi
+    # d2 lam / dF2 = (d_ia d_j d_b - g_ij g_ab) / lam
+    for i in range(3):
+        for j in range(3):
+            for a_ in range(3):
+                for b in range(3):
+                    p, q = 3 * i + j, 3 * a_ + b
+                    hl = ((i == a_) * d[j] * d[b] - g[p] * g[q]) / lam
+                    H[p, q] += ddpsi * g[p] * g[q] + dpsi * hl
+    return psi
+
+
+@nb.njit(**JIT)
+def _is_positive_definite(H, shift):
+    """Cholesky test of H + shift I for a small symmetric matrix H (n,n)."""
+    n = H.shape[0]
+    L = np.zeros((n, n))
+    for j in range(n):
+        s = H[j, j] + shift
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not s > 0:
+            return False
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            s = H[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    return True
+
+
+@nb.njit(**JIT)
+def project_element(H, floor):
+    """Clamp the eigenvalues of the symmetric block H (n,n) to >= floor, in place."""
+    if floor == 0.0 and _is_positive_definite(H, 1e-10 * np.abs(H).max()):
+        return     # eigenvalues >= -1e-10 |H|: clamping changes nothing that matters; no eigh
+    w, Q = np.linalg.eigh(H)
+    if w.min() >= floor:
+        return
+    for k in range(len(w)):
+        w[k] = max(w[k], floor)
+    H[:, :] = (Q * w) @ Q.T
+
+
+@nb.njit(parallel=True, **JIT)
+def _batch(F, d, a, prm, order, fibre):
+    T = F.shape[0]
+    psi = np.empty(T)
+    P = np.zeros((T, 3, 3))
+    H = np.zeros((T, 9, 9))
+    for t in nb.prange(T):
+        if fibre:
+            psi[t] = fibre_element(F[t], d[t], a[t], prm, order, P[t], H[t])
+        else:
+            psi[t] = iso_element(F[t], prm, order, P[t], H[t])
+    return psi, P, H
+
+
+def _out(psi, P, H, order):
+    return psi, (P if order >= 1 else None), (H if order == 2 else None)
 
 
 def isotropic(F, m: Material, order=2):
     """Mooney-Rivlin + quasi-incompressibility: psi (T,), P (T,3,3), dP/dF (T,9,9) or None."""
-    I1, I2, J = invariants(F)
-    c = 2 * m.mu10 + 4 * m.mu01
-    psi = m.mu10 * (I1 - 3) + m.mu01 * (I2 - 3) - c * (J - 1) + 0.5 * m.kappa * (J - 1) ** 2
-    if order == 0:
-        return psi, None, None
-    Ft = np.transpose(F, (0, 2, 1))
-    C = Ft @ F
-    cof = cofactor(F)
-    sJ = m.kappa * (J - 1) - c
-    P = 2 * m.mu10 * F + m.mu01 * (2 * I1[:, None, None] * F - 2 * (F @ C)) + sJ[:, None, None] * cof
-    if order == 1:
-        return psi, P, None
-    T = len(F)
-    B = F @ Ft
-    # d2 I2 / dF_ij dF_ab = 2 [2 F_ij F_ab + I1 d_ia d_jb - d_ia C_bj - F_ib F_aj - B_ia d_jb]
-    H = 2 * m.mu01 * (2 * F[:, :, :, None, None] * F[:, None, None, :, :]
-                      - F[:, :, None, None, :] * Ft[:, None, :, :, None])
-    H += m.kappa * cof[:, :, :, None, None] * cof[:, None, None, :, :]
-    D = 2 * m.mu01 * (I1[:, None, None] * _I3 - C) + 2 * m.mu10 * _I3
-    for i in range(3):
-        H[:, i, :, i, :] += D
-        H[:, :, i, :, i] -= 2 * m.mu01 * B
-    # eps_jbn v_n = -[v]x_jb, so the (i, a) block of the J Hessian is -eps_iak [F_k.]x
-    for i, a, k, si in _LC:
-        H[:, i, :, a, :] -= si * sJ[:, None, None] * _skew(F[:, k, :])
-    return psi, P, H.reshape(T, 9, 9)
-
-
-def fibre_curves(lam, a, m: Material):
-    """Fibre energy per unit volume and its first two derivatives in lam (each like lam)."""
-    w, p1, p2, s = m.active_width, m.passive_p1, m.passive_p2, m.sigma_max
-    u = lam - 1.0
-    g = np.exp(-(u / w) ** 2)
-    psi_a = 0.5 * np.sqrt(np.pi) * w * erf(u / w)
-    da, dda = g, -2 * u / w ** 2 * g
-    e = np.exp(p2 * np.maximum(u, 0.0))
-    stretched = u > 0
-    psi_p = np.where(stretched, p1 * ((e - 1) / p2 - u), 0.0)
-    dp = np.where(stretched, p1 * (e - 1), 0.0)
-    ddp = np.where(stretched, p1 * p2 * e, 0.0)
-    return s * (psi_p + a * psi_a), s * (dp + a * da), s * (ddp + a * dda)
+    F = np.ascontiguousarray(F, float)
+    z = np.zeros((len(F), 3))
+    return _out(*_batch(F, z, z[:, 0], m.params(), order, False), order)
 
 
 def fibre(F, d, a, m: Material, order=2):
-    """Anisotropic fibre term for fibres d (T,3) (unit, rest frame) at activations a (T,).
+    """Fibre term for fibres d (T,3) (unit, rest frame) at activations a (T,): psi, P, dP/dF."""
+    F = np.ascontiguousarray(F, float)
+    return _out(*_batch(F, np.ascontiguousarray(d, float), np.ascontiguousarray(a, float),
+                        m.params(), order, True), order)
 
-    Returns psi (T,), P (T,3,3), dP/dF (T,9,9) (None when not asked for).
-    """
-    Fd = np.einsum("tij,tj->ti", F, d)
-    lam = np.maximum(np.linalg.norm(Fd, axis=1), 1e-12)
-    psi, dpsi, ddpsi = fibre_curves(lam, a, m)
-    if order == 0:
-        return psi, None, None
-    g = np.einsum("ti,tj->tij", Fd, d) / lam[:, None, None]       # d lam / dF
-    P = dpsi[:, None, None] * g
-    if order == 1:
-        return psi, P, None
-    T = len(F)
-    g9 = g.reshape(T, 9)
-    # d2 lam / dF2 = (d_ia d_j d_b - g_ij g_ab) / lam
-    Hl = (np.einsum("ia,tj,tb->tijab", _I3, d, d).reshape(T, 9, 9)
-          - np.einsum("ti,tj->tij", g9, g9)) / lam[:, None, None]
-    H = ddpsi[:, None, None] * np.einsum("ti,tj->tij", g9, g9) + dpsi[:, None, None] * Hl
-    return psi, P, H
+
+@nb.njit(parallel=True, **JIT)
+def _project_batch(H, floor):
+    for t in nb.prange(H.shape[0]):
+        project_element(H[t], floor)
 
 
 def project_psd(H, floor=0.0):
-    """Clamp the eigenvalues of symmetric blocks H (T,n,n) to >= floor (definiteness fix)."""
-    w, Q = np.linalg.eigh(H)
-    if np.all(w >= floor):
-        return H
-    return np.einsum("tij,tj,tkj->tik", Q, np.maximum(w, floor), Q)
+    """Copy of symmetric blocks H (T,n,n) with eigenvalues clamped to >= floor (definiteness fix)."""
+    H = np.array(H, float)
+    _project_batch(H, floor)
+    return H

@@ -14,8 +14,8 @@ Each Newton step factorises the exact Hessian first and falls back to the per-el
 definiteness-projected one when the factorisation fails or the step is not a descent
 direction (DESIGN.md: exact-first took 5 iterations where always-projected took 23). A
 backtracking Armijo line search on E that also refuses to create inverted tets follows.
-The factorisation of the exact Hessian at the solution is kept on the result for the
-tangent/adjoint solves of the next stage.
+The exact Hessian at the solution is kept on the result; its factorisation
+(``SimResult.solver``) is made on first use by the tangent/adjoint solves (sim.adjoint).
 """
 from __future__ import annotations
 
@@ -43,8 +43,9 @@ class SimResult:
 
     X (N,3) m flesh positions; activations (M,); jaw (6,); iterations; residuals: relative
     residual per iteration; energy J; inverted: number of inverted tets; min_J: smallest
-    volume ratio; seconds: wall time by phase; solver: the factorised exact Newton matrix at
-    X (free DOFs; None when not kept); contacts: the active ContactSet at X.
+    volume ratio; seconds: wall time by phase; newton_data: the exact Newton matrix at X
+    (upper CSR data over the free DOFs of the simulator's pattern); contacts: the frozen
+    ContactSet the solution satisfies; tracks: the Tracks it was solved with.
     """
     X: np.ndarray
     activations: np.ndarray
@@ -56,9 +57,21 @@ class SimResult:
     inverted: int
     min_J: float
     seconds: dict = field(default_factory=dict)
-    solver: object = None
+    newton_data: np.ndarray = None
     contacts: ContactSet = None
     tracks: Tracks = None
+    _make_solver: object = field(default=None, repr=False)
+    _solver: object = field(default=None, repr=False)
+
+    @property
+    def solver(self):
+        """The factorised exact Newton matrix at X (for tangent/adjoint solves), made on first
+        use and kept; raises NotSPD if the matrix at the solution is not positive definite."""
+        if self._solver is None:
+            s = self._make_solver()
+            s.factor(self.newton_data)
+            self._solver = s
+        return self._solver
 
     def report(self):
         """One-paragraph status line for logs and errors."""
@@ -125,8 +138,10 @@ class Simulator:
         pairs = self.collisions.coupled_pairs() if self.collisions else None
         self.pattern = Pattern(dof, tets, pairs)
         self._solver_name = solver
-        self._solver = None
-        self.refresh_iterations, self.refresh_residual = 10, 1e-3
+        self._solver = linsolve.make_solver(self.pattern, solver)      # symbolic analysis once
+        # contact planes are re-detected after a Newton step that moved some vertex by more than
+        # refresh_distance (m), during the first refresh_iterations iterations
+        self.refresh_iterations, self.refresh_distance = 10, 0.05 * self.edge_length
         # force scale for the absolute convergence floor: shear x edge^2 per vertex
         self.force_scale = shear * self.edge_length ** 2
 
@@ -191,16 +206,18 @@ class Simulator:
         act = self.activation_vector(activations)
         return self._total(np.asarray(X, float), act, contacts or ContactSet.empty(), tracks, order)
 
-    def _solver_for(self):
-        if self._solver is None:
-            self._solver = linsolve.make_solver(self.pattern, self._solver_name)
-        return self._solver
+    def make_solver(self):
+        """A new solver for this simulator's sparsity pattern (symbolic analysis done)."""
+        return linsolve.make_solver(self.pattern, self._solver_name)
 
     # -- Newton -----------------------------------------------------------------------------
-    def solve(self, activations=None, jaw=None, tracks=None, warm=None, rtol=1e-6,
-              max_iter=40, keep_factor=True, raise_on_failure=True, progress=None):
+    def solve(self, activations=None, jaw=None, tracks=None, warm=None, contacts=None, rtol=1e-6,
+              max_iter=40, raise_on_failure=True, progress=None):
         """Steady state for muscle activations (dict or (M,)), jaw parameters (6,), optional
         Tracks (Eq. 5), warm start from a previous SimResult. Returns a SimResult.
+
+        contacts: a ContactSet to keep frozen (jaw planes re-posed for ``jaw``) instead of
+        detecting contacts; the solution is then a smooth function of the inputs.
 
         Converged when the free-DOF residual |f| <= rtol * max(|f_0|, force scale), where f_0
         is the residual at the start (force scale: shear modulus x edge length^2 per DOF).
@@ -217,8 +234,16 @@ class Simulator:
             X = self.model.skinned_volume(jaw)
         fixed = self.dof_of_vertex < 0
         X[fixed] = Xc[fixed]
-        solver = self._solver_for()
-        contacts = self.collisions.detect(X, jm) if self.collisions else ContactSet.empty()
+        solver = self._solver
+        refresh = self.collisions is not None and contacts is None
+        if contacts is not None:
+            contacts = contacts.posed(jm)
+        elif warm is not None and warm.contacts is not None:
+            contacts = warm.contacts.posed(jm)
+        elif self.collisions:
+            contacts = self.collisions.detect(X, jm)
+        else:
+            contacts = ContactSet.empty()
         residuals, ref = [], None
         converged, it = False, 0
         vols = self.elements.volumes(X)
@@ -242,27 +267,19 @@ class Simulator:
             it += 1
             dx = self._newton_step(solver, X, act, contacts, tracks, data, g, secs)
             t = time.perf_counter()
-            X, _, n_inv = self._line_search(X, dx, E, g, act, contacts, tracks, n_inv)
+            Xn, _, n_inv = self._line_search(X, dx, E, g, act, contacts, tracks, n_inv)
             secs["line_search"] += time.perf_counter() - t
-            # contact planes follow X until the solve is close, then stay frozen so the last
-            # iterations solve one smooth problem and converge quadratically
-            if self.collisions and it < self.refresh_iterations and residuals[-1] > self.refresh_residual:
+            moved = float(np.abs(Xn - X).max())
+            X = Xn
+            # contact planes follow X while it moves, then stay frozen so the last iterations
+            # solve one smooth problem and converge quadratically
+            if refresh and it < self.refresh_iterations and moved > self.refresh_distance:
                 contacts = self.collisions.detect(X, jm)
-        kept = None
-        if converged and keep_factor:
-            t = time.perf_counter()
-            try:
-                solver.factor(data)
-                kept = solver
-                self._solver = None      # the result owns this factorisation now
-            except linsolve.NotSPD:
-                pass
-            secs["factor"] += time.perf_counter() - t
         vols = self.elements.volumes(X) / self.elements.volume
         res = SimResult(X=X, activations=act, jaw=jaw, converged=converged, iterations=it,
                         residuals=residuals, energy=float(E), inverted=int((vols <= 0).sum()),
-                        min_J=float(vols.min()), seconds=secs,
-                        solver=kept, contacts=contacts, tracks=tracks)
+                        min_J=float(vols.min()), seconds=secs, newton_data=data,
+                        contacts=contacts, tracks=tracks, _make_solver=self.make_solver)
         secs["other"] = time.perf_counter() - t_all - sum(secs.values())
         if not converged and raise_on_failure:
             raise SimulationError(res.report())
@@ -296,7 +313,9 @@ class Simulator:
         step[self.free] = dx.reshape(-1, 3)
         slope = float(dx @ g)
         alpha = 1.0
-        for _ in range(40):
+        # the energy test is meaningful only while the predicted decrease is above the
+        # round-off of E; below it a noisy E would accept vanishing steps
+        for _ in range(40 if -slope > 1e-9 * abs(E) else 0):
             Xn = X + alpha * step
             vols = self.elements.volumes(Xn)
             inv = int((vols <= 0).sum())
@@ -305,13 +324,18 @@ class Simulator:
                 if np.isfinite(En) and En <= E + 1e-4 * alpha * slope:
                     return Xn, En, inv
             alpha *= 0.5
-        # Near convergence the energy decrease drowns in round-off: accept the full step if
-        # it reduces the residual instead.
-        Xn = X + step
-        inv = int((self.elements.volumes(Xn) <= 0).sum())
-        En, gn, _ = self._total(Xn, act, contacts, tracks, 1)
-        if inv <= n_inv and np.linalg.norm(gn) < np.linalg.norm(g):
-            return Xn, En, inv
+        # Otherwise (and near convergence) accept the longest step that reduces the residual (also what carries Newton over the kink of a
+        # penalty contact that starts or stops touching).
+        r0 = np.linalg.norm(g)
+        alpha = 1.0
+        for _ in range(12):
+            Xn = X + alpha * step
+            inv = int((self.elements.volumes(Xn) <= 0).sum())
+            if inv <= n_inv:
+                En, gn, _ = self._total(Xn, act, contacts, tracks, 1)
+                if np.linalg.norm(gn) < r0:
+                    return Xn, En, inv
+            alpha *= 0.5
         return X, E, n_inv
 
     def volume_change(self, result):

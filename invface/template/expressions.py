@@ -75,7 +75,7 @@ def simulate_blendshapes(model, units=None, progress=None):
             progress(f"expression {i + 1}/{len(items)}: {name}")
         a = activations_for(unit, model.muscles)
         jaw = np.zeros(6) if unit[2] is None else np.asarray(unit[2], float)
-        res = sim.solve(a, jaw=jaw, keep_factor=False)
+        res = sim.solve(a, jaw=jaw)
         x = model.embedded_surface(res.X)
         pre = unskin(x, model.jaw_weights, model.jaw_matrix(jaw)) if np.any(jaw) else x
         names.append(name)
@@ -90,3 +90,36 @@ def simulate_blendshapes(model, units=None, progress=None):
     model.blendshape_activations = np.array(acts)
     model.meta = {**model.meta, "blendshape_jaw": dict(zip(names, jaws)), "blendshape_sims": stats}
     return model
+
+
+def calibrate_activation_curves(model, min_activation=0.2):
+    """Fit each muscle's activation-length curve to the template's own expressions (in place).
+
+    For every shape that activated muscle m with a >= min_activation, the blendshape-driven
+    centre-line (Eq. 8 with that shape at weight 1 and its jaw) shortens to L/L0 = s; the
+    curve a = clip(c (1 - s), 0, 1) with the least-squares slope c over those shapes makes
+    the driven simulation recover the activations that made the shapes. Muscles that no shape
+    shortens keep their curve. Needs model.track_displacements. Returns the slopes (M,).
+    """
+    from ..sim.tracks import MuscleTracks
+
+    tr = MuscleTracks(model, model.track_displacements, np.ones(len(model.rest_positions), bool), 1.0)
+    jaws = model.meta.get("blendshape_jaw", {})
+    K = len(model.blendshape_names)
+    strain = np.zeros((K, len(model.muscles)))
+    for k, name in enumerate(model.blendshape_names):
+        b = np.zeros(K)
+        b[k] = 1.0
+        st = tr.evaluate(b, model.jaw_matrix(np.asarray(jaws.get(name, np.zeros(6)), float)))
+        strain[k] = 1 - st.lengths / np.array([m.rest_length for m in model.muscles])
+    slopes = np.full(len(model.muscles), np.nan)
+    for i, m in enumerate(model.muscles):
+        a = model.blendshape_activations[:, i]
+        use = (a >= min_activation) & (strain[:, i] > 0.01)
+        if not use.any():
+            continue
+        c = float(a[use] @ strain[use, i] / (strain[use, i] @ strain[use, i]))
+        slopes[i] = c
+        s_full = 1 - 1 / c                       # L/L0 at full activation
+        m.activation_curve = np.array([[min(s_full, 0.9), 1.0], [1.0, 0.0], [1.5, 0.0]])
+    return slopes
