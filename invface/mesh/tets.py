@@ -129,3 +129,21 @@ def harmonic(L, fixed, values):
     sol = splu(A).solve(np.asarray(rhs).reshape(len(free), -1))
     u[free] = sol.reshape((len(free),) + values.shape[1:])
     return u
+
+
+def locate(X, tets, points, k=32):
+    """Tet containing each point, or the best extrapolating one nearby.
+
+    Candidates are the k tets with the nearest centroids; the winner has the largest minimum
+    barycentric weight (inside: >= 0). Returns tet ids (P,) and barycentric weights (P,4).
+    """
+    from scipy.spatial import cKDTree
+
+    points = np.asarray(points, float).reshape(-1, 3)
+    k = min(k, len(tets))
+    _, cand = cKDTree(X[tets].mean(1)).query(points, k=k)
+    cand = cand.reshape(len(points), k)
+    bary = barycentric(X, tets, cand.ravel(), np.repeat(points, k, axis=0)).reshape(len(points), k, 4)
+    best = np.argmax(bary.min(2), axis=1)
+    rows = np.arange(len(points))
+    return cand[rows, best], bary[rows, best]

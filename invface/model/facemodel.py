@@ -7,7 +7,7 @@ import numpy as np
 
 from ..errors import InvfaceError
 from .controls import Controls
-from .rig import blendshape_surface, jaw_transform, skin
+from .rig import BlendshapeRig, jaw_transform, skin
 
 
 @dataclass
@@ -66,6 +66,7 @@ class FaceModel:
     blendshape_activations: np.ndarray = None   # (K, M) activations that made each shape
     track_displacements: np.ndarray = None      # (K,N,3) Poisson dX_k (paper 000 Eq. 11)
     meta: dict = field(default_factory=dict)
+    _surface_models: dict = field(default_factory=dict, repr=False, compare=False)
 
     # -- public API -------------------------------------------------------------------
     @classmethod
@@ -97,16 +98,28 @@ class FaceModel:
         """Surface vertex positions x(w) (V,3) in metres, before the rigid head pose.
 
         kind="blendshape": Eq. 1-2, x = T(j)(n + B b).
-        kind="simulation": the blendshape-driven muscle simulation (paper 000 Sec. 6).
+        kind="simulation": the blendshape-driven muscle simulation (paper 000 Sec. 6),
+        warm-started from this model's previous simulation call.
         """
+        return self.surface_model(kind).surface(self.parameters(w))
+
+    def parameters(self, w=None) -> np.ndarray:
+        """Parameter vector p = (b (K,), jaw (6,)) of controls w (Controls or dict)."""
         c = Controls.coerce(w, self.blendshape_names)
-        if kind == "blendshape":
-            return blendshape_surface(self.neutral, self.blendshapes, c.weight_vector(self.blendshape_names),
-                                      c.jaw, self.jaw_pivot, self.jaw_frame, self.jaw_weights)
-        if kind == "simulation":
-            raise InvfaceError("kind='simulation' needs the muscle simulation (invface.sim), which this "
-                               "version does not include yet; use kind='blendshape'")
-        raise InvfaceError(f"unknown surface kind '{kind}': use 'blendshape' or 'simulation'")
+        return np.concatenate([c.weight_vector(self.blendshape_names), c.jaw])
+
+    def surface_model(self, kind="blendshape"):
+        """The model x(p) of ``kind`` (created once per FaceModel): parameter_names,
+        surface(p), surface_jacobian(p) (P,V,3) and surface_vjp(p, gx) (P,)."""
+        if kind not in ("blendshape", "simulation"):
+            raise InvfaceError(f"unknown surface kind '{kind}': use 'blendshape' or 'simulation'")
+        if kind not in self._surface_models:
+            if kind == "blendshape":
+                self._surface_models[kind] = BlendshapeRig(self)
+            else:
+                from ..sim.driven import DrivenSimulation
+                self._surface_models[kind] = DrivenSimulation(self)
+        return self._surface_models[kind]
 
     def embedded_surface(self, X) -> np.ndarray:
         """Surface positions (V,3) from tet-mesh positions X (N,3) through the embedding."""

@@ -18,6 +18,19 @@ def euler_xyz(theta):
     return Rz @ Ry @ Rx
 
 
+def euler_xyz_derivatives(theta):
+    """dR/dtheta_i (3,3,3) of ``euler_xyz`` (index 0: the angle)."""
+    cx, cy, cz = np.cos(theta)
+    sx, sy, sz = np.sin(theta)
+    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    dRx = np.array([[0, 0, 0], [0, -sx, -cx], [0, cx, -sx]])
+    dRy = np.array([[-sy, 0, cy], [0, 0, 0], [-cy, 0, -sy]])
+    dRz = np.array([[-sz, -cz, 0], [cz, -sz, 0], [0, 0, 0]])
+    return np.array([Rz @ Ry @ dRx, Rz @ dRy @ Rx, dRz @ Ry @ Rx])
+
+
 def jaw_transform(jaw, pivot, frame):
     """4x4 rigid transform of the jaw for parameters jaw (6,) about ``pivot`` (3,) m.
 
@@ -32,13 +45,99 @@ def jaw_transform(jaw, pivot, frame):
     return M
 
 
+def jaw_transform_derivatives(jaw, pivot, frame):
+    """d(jaw_transform)/d(jaw_i) (6,4,4) for jaw parameters jaw (6,)."""
+    D = np.zeros((6, 4, 4))
+    for i, dE in enumerate(euler_xyz_derivatives(np.asarray(jaw[:3], float))):
+        dR = frame @ dE @ frame.T
+        D[i, :3, :3] = dR
+        D[i, :3, 3] = -dR @ pivot
+    D[3:, :3, 3] = frame.T            # translation i moves along the frame's axis i
+    return D
+
+
 def skin(points, weights, M):
     """Linear blend skinning between identity and M (4,4): points (N,3), weights (N,) -> (N,3)."""
     moved = points @ M[:3, :3].T + M[:3, 3]
     return points + weights[:, None] * (moved - points)
 
 
+def skin_derivatives(points, weights, M, deltas, dM):
+    """Derivatives of skin(points + sum_k b_k deltas_k, weights, M) at b's current points.
+
+    points (N,3) pre-skinning positions, deltas (K,N,3), dM (J,4,4) transform derivatives.
+    Returns (K+J, N, 3): d/db_k = (1-w) d_k + w R d_k; d/dj = w (dR p + dt).
+    """
+    R = M[:3, :3]
+    w = weights[:, None]
+    db = (1 - w) * deltas + w * (deltas @ R.T)
+    dj = w * (np.einsum("jab,nb->jna", dM[:, :3, :3], points) + dM[:, None, :3, 3])
+    return np.concatenate([db, dj])
+
+
 def blendshape_surface(neutral, deltas, b, jaw, pivot, frame, jaw_weights):
     """Eq. 1: x = T(j)(n + B b). neutral (V,3), deltas (K,V,3), b (K,), jaw (6,) -> (V,3)."""
-    pre = neutral + np.tensordot(b, deltas, axes=(0, 0)) if len(b) else neutral.copy()
-    return skin(pre, jaw_weights, jaw_transform(jaw, pivot, frame))
+    return skin(pre_skinning(neutral, deltas, b), jaw_weights, jaw_transform(jaw, pivot, frame))
+
+
+def pre_skinning(neutral, deltas, b):
+    """n + B b (V,3)."""
+    return neutral + np.tensordot(b, deltas, axes=(0, 0)) if len(b) else neutral.copy()
+
+
+JAW_NAMES = ["jaw_rx", "jaw_ry", "jaw_rz", "jaw_tx", "jaw_ty", "jaw_tz"]
+
+
+def split_parameters(p, names, n_blendshapes):
+    """(b (K,), jaw (6,)) from a parameter vector p (K+6,) laid out as ``names``; validated."""
+    from ..errors import ControlsError
+
+    p = np.asarray(p, float).reshape(-1)
+    if p.shape != (len(names),):
+        raise ControlsError(f"expected {len(names)} parameters ({n_blendshapes} blendshape weights "
+                            f"+ 6 jaw), got {p.size}")
+    if not np.all(np.isfinite(p)):
+        bad = [n for n, v in zip(names, p) if not np.isfinite(v)]
+        raise ControlsError(f"non-finite control values: {', '.join(bad)}")
+    return p[:n_blendshapes], p[n_blendshapes:]
+
+
+class BlendshapeRig:
+    """The blendshape model x(p) (Eq. 1-2) behind the surface-model interface shared with the
+    driven simulation: parameter_names, surface(p), surface_jacobian(p), surface_vjp(p, gx),
+    with p = (b (K,), jaw (6,)) and surfaces (V,3) m."""
+
+    def __init__(self, model):
+        self.model = model
+        self.parameter_names = list(model.blendshape_names) + JAW_NAMES
+        self.n_blendshapes = len(model.blendshape_names)
+
+    def split(self, p):
+        return split_parameters(p, self.parameter_names, self.n_blendshapes)
+
+    def surface(self, p):
+        m = self.model
+        b, jaw = self.split(p)
+        return blendshape_surface(m.neutral, m.blendshapes, b, jaw, m.jaw_pivot, m.jaw_frame, m.jaw_weights)
+
+    def surface_jacobian(self, p):
+        """dx/dp (P, V, 3), analytic."""
+        m = self.model
+        b, jaw = self.split(p)
+        return skin_derivatives(pre_skinning(m.neutral, m.blendshapes, b), m.jaw_weights, m.jaw_matrix(jaw),
+                                m.blendshapes, jaw_transform_derivatives(jaw, m.jaw_pivot, m.jaw_frame))
+
+    def surface_vjp(self, p, gx):
+        """dLoss/dp (P,) for dLoss/dx = gx (V,3)."""
+        m = self.model
+        b, jaw = self.split(p)
+        M = m.jaw_matrix(jaw)
+        gx = np.asarray(gx, float)
+        w = m.jaw_weights[:, None]
+        # d/db_k: sum_v gx_v . ((1-w) d + w R d) = sum_v ((1-w) gx + w R^T gx) . d
+        gpre = (1 - w) * gx + w * (gx @ M[:3, :3])
+        gb = np.einsum("kvi,vi->k", m.blendshapes, gpre)
+        pre = pre_skinning(m.neutral, m.blendshapes, b)
+        dM = jaw_transform_derivatives(jaw, m.jaw_pivot, m.jaw_frame)
+        gj = np.einsum("jab,vb,va->j", dM[:, :3, :3], w * pre, gx) + dM[:, :3, 3] @ (w * gx).sum(0)
+        return np.concatenate([gb, gj])

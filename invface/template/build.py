@@ -128,8 +128,12 @@ def generate(resolution=1.0, progress=None, expressions=True):
               "quality": q},
     )
     if expressions:
-        from .expressions import simulate_blendshapes
+        from ..sim.poisson import track_displacements
+        from .expressions import calibrate_activation_curves, simulate_blendshapes
         simulate_blendshapes(model, progress=say)
+        say("muscle-track precompute (Poisson solves, Eq. 10-11)")
+        model.track_displacements = track_displacements(model)
+        calibrate_activation_curves(model)
         model.meta["build_seconds"] = round(time.perf_counter() - t0, 2)
     return model
 
@@ -145,9 +149,9 @@ def cache_dir() -> Path:
 def cache_path(resolution=1.0, expressions=True) -> Path:
     """Cache file keyed on generator version and options (and this module's source)."""
     pkg = Path(__file__).parent.parent
-    files = sorted(Path(__file__).parent.glob("*.py"))
-    if expressions:     # the blendshapes depend on the simulator too
-        files += sorted((pkg / "sim").glob("*.py"))
+    files = sorted(Path(__file__).parent.glob("*.py")) + sorted((pkg / "mesh").glob("*.py"))
+    if expressions:     # the blendshapes and track data depend on the simulator and the rig too
+        files += sorted((pkg / "sim").glob("*.py")) + [pkg / "model" / "rig.py"]
     src = b"".join(p.read_bytes() for p in files)
     key = hashlib.sha1(src + f"{GENERATOR_VERSION}:{float(resolution):.6g}:{expressions}".encode()).hexdigest()[:12]
     kind = "" if expressions else "-noexpr"

@@ -1,0 +1,120 @@
+"""Derivatives of the driven simulation (paper 000 Sec. 7) by the implicit function theorem.
+
+At a converged state the free-DOF residual r(X^U, p) = dE/dX^U vanishes, so
+
+    H dX^U/dp = -dr/dp,          H = dr/dX^U (the exact Newton matrix at the solution)
+
+with p = (b, j). dr/dp collects
+  * the active fibre forces times the activation slopes: (df_fvm/da)(da/dL)(dL/dC)(dC/dp);
+  * the tracks: -k dM/dp (Eq. 5, 7);
+  * the jaw-driven constrained vertices: H_UC dX^C/dj (full element stiffness);
+  * the collision planes on the jaw, which move rigidly with it.
+Tangent mode solves all K+6 right-hand sides with one factorisation (the Jacobian Dogleg
+needs); adjoint mode solves H mu = dL/dX^U once and contracts mu with dr/dp term by term,
+so a gradient costs one back-substitution whatever K is.
+
+Collisions: the planes of flesh-flesh contacts (the facing lip or lid) are frozen at the
+solution (lagged contact geometry, the same choice the Newton matrix makes); the active set
+is the penetrating contacts at the solution. The penalty force is C1 (k min(0, gap) n), so
+the derivative jumps only where a contact starts or stops touching: a one-sided derivative
+is returned there. The derivative is exact for the solve with those contacts held fixed
+(Simulator.solve(contacts=...)).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.rig import jaw_transform_derivatives
+
+
+class Sensitivity:
+    """Tangent and adjoint derivatives of a DrivenResult of a DrivenSimulation.
+
+    Arrays: P = K + 6 parameters, N tet vertices, V surface vertices, n free DOFs.
+    """
+
+    def __init__(self, driven, result):
+        self.ds, self.res = driven, result
+        sim, model = driven.sim, driven.model
+        self.sim = sim
+        X = result.X
+        _, jaw = driven.split(result.p)
+        jm = model.jaw_matrix(jaw)
+        dM = jaw_transform_derivatives(jaw, model.jaw_pivot, model.jaw_frame)
+        K = driven.n_blendshapes
+        self.P, self.K, self.N = K + 6, K, len(X)
+        tr = driven.tracks
+        self.da = tr.activation_jacobian(result.tracks, jm, dM)               # (M, P)
+        self.dt = tr.target_derivatives(result.tracks, jm, dM)                # (P, n_tr, 3)
+        self.dXc = np.zeros((self.P, self.N, 3))                                # constrained X^C(j)
+        j = model.fixed_jaw
+        self.dXc[K:, j] = np.einsum("pab,nb->pna", dM[:, :3, :3], model.rest_positions[j]) + dM[:, None, :3, 3]
+        self.active = sim.flesh.active_forces(X)                               # (Q,4,3)
+        self.dcontact = result.sim.contacts.jaw_derivative(X, dM, self.N)      # (6,N,3)
+        _, _, self.Ke = sim.flesh.evaluate(X, result.sim.activations, 2)       # exact element stiffness
+        self.free = sim.free
+
+    # -- pieces of dr/dp ------------------------------------------------------------------
+    def _stiffness_times(self, V):
+        """Full-mesh element stiffness times displacements V (N,3) -> (N,3) (flesh only)."""
+        tets = self.sim.elements.tets
+        z = np.einsum("tab,tb->ta", self.Ke, V[tets].reshape(len(tets), 12)).reshape(-1, 3)
+        out = np.zeros((self.N, 3))
+        np.add.at(out, tets.reshape(-1), z)
+        return out
+
+    def _active_matrix(self):
+        """Active force per muscle (M, N, 3): d gradient / d a_m."""
+        fl = self.sim.flesh
+        out = np.zeros((len(self.da), self.N, 3))
+        np.add.at(out, (fl.fmus[:, None], self.sim.elements.tets[fl.ftets]), self.active)
+        return out
+
+    def rhs(self):
+        """dr/dp as vertex fields (P, N, 3) (free rows are the ones that count)."""
+        R = np.einsum("mni,mp->pni", self._active_matrix(), self.da)
+        tr = self.ds.tracks
+        R[:, tr.vertices] -= tr.stiffness[None, :, None] * self.dt
+        for i in range(self.K, self.P):
+            R[i] += self._stiffness_times(self.dXc[i])
+        R[self.K:] += self.dcontact
+        return R
+
+    def _rhs_transpose(self, mu):
+        """mu . dr/dp (P,) for mu (N,3) zero on constrained vertices, without forming dr/dp."""
+        fl, tets = self.sim.flesh, self.sim.elements.tets
+        per_muscle = np.bincount(fl.fmus, np.einsum("qni,qni->q", self.active, mu[tets[fl.ftets]]),
+                                 minlength=len(self.da))
+        g = per_muscle @ self.da
+        tr = self.ds.tracks
+        g -= np.einsum("pvi,vi->p", self.dt, tr.stiffness[:, None] * mu[tr.vertices])
+        Hmu = self._stiffness_times(mu)
+        g[self.K:] += np.einsum("pni,ni->p", self.dXc[self.K:], Hmu)
+        g[self.K:] += np.einsum("pni,ni->p", self.dcontact, mu)
+        return g
+
+    # -- derivatives ------------------------------------------------------------------------
+    def tangent(self):
+        """dX/dp (P, N, 3): all tet vertices, from one factorisation and P right-hand sides."""
+        R = self.rhs()[:, self.free].reshape(self.P, -1)
+        dU = -self.res.sim.solver.solve(np.ascontiguousarray(R.T)).reshape(-1, self.P)
+        dX = self.dXc.copy()
+        dX[:, self.free] = dU.T.reshape(self.P, -1, 3)
+        return dX
+
+    def gradient(self, gX):
+        """dLoss/dp (P,) for dLoss/dX = gX (N,3): one adjoint solve."""
+        gX = np.asarray(gX, float)
+        mu = np.zeros((self.N, 3))
+        mu[self.free] = self.res.sim.solver.solve(gX[self.free].reshape(-1)).reshape(-1, 3)
+        return -self._rhs_transpose(mu) + np.einsum("pni,ni->p", self.dXc, gX)
+
+    def surface_jacobian(self):
+        """dx/dp (P, V, 3) of the render surface."""
+        dX = self.tangent()
+        W = self.ds.W
+        return np.stack([W @ d for d in dX])
+
+    def surface_gradient(self, gx):
+        """dLoss/dp (P,) for dLoss/dx = gx (V,3) on the render surface."""
+        return self.gradient(self.ds.W.T @ np.asarray(gx, float))

@@ -1,0 +1,116 @@
+"""The blendshape-driven muscle simulation x(w) of paper 000 Sec. 6: controls -> surface.
+
+    ds = DrivenSimulation(model)
+    r = ds.solve(p)              # p = (b (K,), jaw (6,)): tracks, activations, quasistatics
+    x = ds.surface(p)            # render-surface vertices (V,3), warm-started from the last solve
+
+Given blendshape weights b and jaw parameters j, the muscle track targets M_m(b, j) (Eq. 7)
+and centre-lines C_m(b, j) (Eq. 8) follow from the Poisson precompute (sim.poisson), the
+centre-line lengths (Eq. 9) give the activations a_m(L_m), the jaw gives the constrained
+vertices X^C(j), and Eq. 6 (FVM + collisions + tracks) is solved for X^U by Newton.
+Derivatives with respect to p are in sim.adjoint.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..model.rig import JAW_NAMES, split_parameters
+from .poisson import track_displacements
+from .quasistatic import SimResult, Simulator
+from .tracks import MuscleTracks, TrackState
+
+@dataclass
+class DrivenResult:
+    """A solved state: parameters p (K+6,), the track state (Eq. 7-9) and the SimResult."""
+    p: np.ndarray
+    tracks: TrackState
+    sim: SimResult
+    _sensitivity: object = field(default=None, repr=False)
+
+    @property
+    def X(self):
+        return self.sim.X
+
+
+def embedding_matrix(model):
+    """Sparse W (V, N) with surface = W @ tet positions (the barycentric embedding)."""
+    V = len(model.embed_tets)
+    rows = np.repeat(np.arange(V), 4)
+    cols = model.tets[model.embed_tets].ravel()
+    return sp.csr_matrix((model.embed_weights.ravel(), (rows, cols)), shape=(V, len(model.rest_positions)))
+
+
+class DrivenSimulation:
+    """x(w) by simulation for a FaceModel (parameters: the model's blendshapes, then the jaw).
+
+    track_stiffness: N/m per track vertex (default 2 x shear modulus x mean edge length);
+    other arguments as ``Simulator``. The Poisson displacements come from the model's bundle
+    (``track_displacements``) or are computed here when it has none.
+    """
+
+    def __init__(self, model, material=None, track_stiffness=None, contact=True,
+                 contact_stiffness=None, solver=None):
+        self.model = model
+        self.sim = Simulator(model, material, contact, contact_stiffness, solver)
+        dX = model.track_displacements
+        K, N = len(model.blendshape_names), len(model.rest_positions)
+        if dX is None or np.shape(dX) != (K, N, 3):
+            dX = track_displacements(model)
+        shear = 2 * (self.sim.material.mu10 + self.sim.material.mu01)
+        k = track_stiffness if track_stiffness is not None else 2.0 * shear * self.sim.edge_length
+        self.tracks = MuscleTracks(model, dX, self.sim.dof_of_vertex >= 0, k)
+        self.parameter_names = list(model.blendshape_names) + JAW_NAMES
+        self.n_blendshapes = K
+        self.W = embedding_matrix(model)
+        self.last = None
+
+    def split(self, p):
+        """(b (K,), jaw (6,)) from a parameter vector p (K+6,); validates it."""
+        return split_parameters(p, self.parameter_names, self.n_blendshapes)
+
+    def solve(self, p, warm="last", contacts=None, **kw):
+        """DrivenResult for parameters p. warm: 'last' (the previous solve), a DrivenResult or
+        None (cold, from the jaw-skinned rest state); contacts: a frozen ContactSet (see
+        Simulator.solve); other keywords go to Simulator.solve."""
+        b, jaw = self.split(p)
+        state = self.tracks.evaluate(b, self.model.jaw_matrix(jaw))
+        if isinstance(warm, str):
+            warm = self.last
+        res = self.sim.solve(state.activations, jaw, tracks=self.tracks.springs(state),
+                             warm=warm.sim if warm is not None else None, contacts=contacts, **kw)
+        out = DrivenResult(np.asarray(p, float).copy(), state, res)
+        self.last = out
+        return out
+
+    def surface_of(self, result):
+        """Render-surface vertices (V,3) of a DrivenResult."""
+        return self.W @ result.X
+
+    def surface(self, p):
+        """Render-surface vertices (V,3) m for parameters p (warm-started)."""
+        return self.surface_of(self.solve(p))
+
+    def result_at(self, p):
+        """The DrivenResult at p: the last one when p is unchanged, else a new (warm) solve."""
+        if self.last is not None and np.array_equal(self.last.p, np.asarray(p, float).reshape(-1)):
+            return self.last
+        return self.solve(p)
+
+    def sensitivity(self, p):
+        """sim.adjoint.Sensitivity at p (reuses the last solve when p is unchanged)."""
+        from .adjoint import Sensitivity
+        r = self.result_at(p)
+        if r._sensitivity is None:
+            r._sensitivity = Sensitivity(self, r)
+        return r._sensitivity
+
+    def surface_jacobian(self, p):
+        """dx/dp (P, V, 3) by tangent solves (one factorisation, P right-hand sides)."""
+        return self.sensitivity(p).surface_jacobian()
+
+    def surface_vjp(self, p, gx):
+        """dLoss/dp (P,) for dLoss/dx = gx (V,3): one adjoint solve."""
+        return self.sensitivity(p).surface_gradient(gx)

@@ -1,0 +1,79 @@
+"""Blendshape-driven volume displacements: the precomputed Poisson solves of paper 000 Eq. 10-11.
+
+For every blendshape k the pre-skinning surface displacement B e_k is carried onto the outer
+boundary of the rest tet mesh (Dirichlet data) and diffused into the volume by the
+volumetric Laplacian of the rest mesh (linear-FEM cotangent weights), with natural (Neumann)
+conditions on the inner boundary (bone attachments, mucosa, cut faces):
+
+    A^U(X0) dX_k = A^C(X0) B e_k                                              (Eq. 11)
+
+A^U is factorised once and all 3K right-hand sides are solved together. By linearity the
+displacement of any combination sum_k b_k B e_k is sum_k b_k dX_k (Eq. 10).
+
+The outer boundary is the set of boundary tet vertices, not attached to bone, that lie on the
+render surface (within a quarter of the mean tet edge); the linear correspondence from the
+surface to them is the barycentric weight of each one's closest point on the render mesh.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from ..errors import InvfaceError
+from ..mesh.closest import closest_points
+from ..mesh.tets import boundary_faces, laplacian
+
+
+def outer_boundary(model):
+    """Outer-boundary tet vertices (B,) and the sparse correspondence S (B, V) with
+    dX[ids] = S @ dx for a surface displacement dx (V, ...)."""
+    X0, tets = model.rest_positions, model.tets
+    faces, _ = boundary_faces(tets)
+    cand = np.unique(faces)
+    bone = np.zeros(len(X0), bool)
+    bone[model.fixed_cranium] = True
+    bone[model.fixed_jaw] = True
+    cand = cand[~bone[cand]]
+    edges = X0[tets[:, [0, 0, 0, 1, 1, 2]]] - X0[tets[:, [1, 2, 3, 2, 3, 3]]]
+    tol = 0.25 * float(np.linalg.norm(edges, axis=2).mean())
+    tri, w, d = closest_points(X0[cand], model.neutral, model.triangles)
+    on = d <= tol
+    if not on.any():
+        raise InvfaceError("no tet-mesh boundary vertex lies on the render surface: the model's "
+                           "embedding is broken (rebuild the model)")
+    ids = cand[on]
+    rows = np.repeat(np.arange(len(ids)), 3)
+    S = sp.csr_matrix((w[on].ravel(), (rows, model.triangles[tri[on]].ravel())),
+                      shape=(len(ids), len(model.neutral)))
+    return ids, S
+
+
+class PoissonTransfer:
+    """The factorised Dirichlet/Neumann volumetric Laplacian of a FaceModel's rest mesh."""
+
+    def __init__(self, model):
+        self.ids, self.S = outer_boundary(model)
+        N = len(model.rest_positions)
+        L = laplacian(model.rest_positions, model.tets).tocsr()
+        self.free = np.setdiff1d(np.arange(N), self.ids)
+        self.N = N
+        self.L_fd = L[self.free][:, self.ids]
+        self._lu = splu(L[self.free][:, self.free].tocsc())
+
+    def solve(self, surface_deltas):
+        """Volume displacements (K,N,3) for surface displacements (K,V,3) (Eq. 11)."""
+        D = np.asarray(surface_deltas, float)
+        K, V = D.shape[:2]
+        flat = np.moveaxis(D, 0, 1).reshape(V, 3 * K)              # columns: (k, xyz)
+        bc = self.S @ flat
+        out = np.zeros((self.N, 3 * K))
+        out[self.ids] = bc
+        if K:
+            out[self.free] = self._lu.solve(-(self.L_fd @ bc))
+        return np.moveaxis(out.reshape(self.N, K, 3), 1, 0)
+
+
+def track_displacements(model):
+    """dX_k (K,N,3) of a FaceModel's blendshapes (pre-skinning deltas), Eq. 10-11."""
+    return PoissonTransfer(model).solve(model.blendshapes)

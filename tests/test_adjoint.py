@@ -1,0 +1,147 @@
+"""Blendshape-driven tracks (Eq. 7-11) and end-to-end derivatives (Sec. 7): Poisson precompute,
+forward model, tangent vs adjoint vs finite differences, the Dr.Jit bridge."""
+import drjit as dr
+import numpy as np
+import pytest
+
+from invface.errors import ControlsError, InvfaceError
+from invface.mesh.tets import laplacian
+from invface.sim.adjoint import Sensitivity
+from invface.sim.driven import DrivenSimulation
+from invface.sim.poisson import PoissonTransfer
+
+Float = dr.llvm.ad.Float
+
+
+@pytest.fixture(scope="module")
+def driven(small_expressive_model):
+    return DrivenSimulation(small_expressive_model)
+
+
+def test_poisson_precompute_is_the_exact_poisson_solution_and_linear(small_expressive_model):
+    m = small_expressive_model
+    pt = PoissonTransfer(m)
+    dX = m.track_displacements
+    assert dX.shape == (len(m.blendshape_names), len(m.rest_positions), 3)
+    b = np.random.default_rng(0).uniform(0, 1, len(dX))
+    combined = np.tensordot(b, m.blendshapes, axes=(0, 0))
+    exact = pt.solve(combined[None])[0]                     # Poisson solve of the combined shape
+    assert np.abs(np.tensordot(b, dX, axes=(0, 0)) - exact).max() <= 1e-10 * np.abs(exact).max()
+    # it is a Poisson solution: Dirichlet data on the outer boundary, harmonic elsewhere
+    assert np.allclose(exact[pt.ids], pt.S @ combined, atol=1e-15)
+    L = laplacian(m.rest_positions, m.tets)
+    r = (L @ exact)[pt.free]
+    assert np.abs(r).max() <= 1e-10 * np.abs(L @ np.where(np.isin(np.arange(len(exact)), pt.ids)[:, None], exact, 0)).max()
+    # the outer boundary lies on the render skin; bone-attached vertices are not in it
+    assert not np.isin(pt.ids, m.fixed_cranium).any() and not np.isin(pt.ids, m.fixed_jaw).any()
+
+
+def test_zero_controls_give_the_rest_pose(driven):
+    r = driven.solve(np.zeros(len(driven.parameter_names)), warm=None)
+    assert r.sim.iterations == 0
+    assert np.abs(r.X - driven.model.rest_positions).max() < 1e-12
+    assert np.allclose(r.tracks.activations, 0)
+
+
+def test_driven_smile_follows_the_blendshape_and_recovers_activations(driven):
+    m = driven.model
+    k = m.blendshape_names.index("lipCornerPull_L")
+    p = np.zeros(len(driven.parameter_names))
+    p[k] = 1.0
+    r = driven.solve(p, warm=None)
+    x_sim, x_bs = driven.surface_of(r), m.surface({"lipCornerPull_L": 1.0})
+    err = np.linalg.norm(x_sim - x_bs, axis=1)
+    moved = np.linalg.norm(x_bs - m.neutral, axis=1).max()
+    assert moved > 0.005 and err.mean() < 0.02 * moved and err.max() < 0.6 * moved
+    i = m.muscle_names.index("zygomaticus_major_L")
+    assert abs(r.tracks.activations[i] - m.blendshape_activations[k, i]) < 0.1
+    assert r.tracks.activations[m.muscle_names.index("zygomaticus_major_R")] < 0.05
+
+
+def _state(driven):
+    K = driven.n_blendshapes
+    names = driven.parameter_names
+    p = np.zeros(K + 6)
+    for n, v in (("lipCornerPull_L", 0.6), ("browInnerUp_R", 0.5), ("lipPucker", 0.3)):
+        p[names.index(n)] = v
+    p[K:] = [0.06, 0.01, -0.01, 0.0005, -0.0003, 0.0004]
+    return p, driven.solve(p, warm=None, rtol=1e-10)
+
+
+def test_tangent_adjoint_and_finite_differences_agree(driven):
+    p, r = _state(driven)
+    S = Sensitivity(driven, r)
+    dX = S.tangent()
+    rng = np.random.default_rng(1)
+    gX = rng.standard_normal(r.X.shape)
+    g_adj = S.gradient(gX)
+    g_tan = np.einsum("pni,ni->p", dX, gX)
+    assert np.abs(g_adj - g_tan).max() <= 1e-8 * np.abs(g_adj).max()
+    names = driven.parameter_names
+    checks = [("lipCornerPull_L", 1e-4), ("lipPucker", 1e-4), ("jaw_rx", 1e-5), ("jaw_ry", 1e-5),
+              ("jaw_tz", 1e-6)]
+    for name, h in checks:
+        i = names.index(name)
+        e = np.zeros_like(p)
+        e[i] = h
+        Xs = [driven.solve(p + s * e, warm=r, contacts=r.sim.contacts, rtol=1e-10).X for s in (1, -1)]
+        fd = (Xs[0] - Xs[1]) / (2 * h)
+        err = np.linalg.norm(fd - dX[i]) / np.linalg.norm(fd)
+        print(name, err)
+        assert err <= 1e-4, name
+    # the jaw moves the lower face; a blendshape weight moves its side of the face
+    assert np.linalg.norm(dX[names.index("jaw_rx")]) > 0
+
+
+def test_surface_models_share_one_interface_and_the_bridge_matches_the_adjoint(small_expressive_model):
+    m = small_expressive_model
+    rng = np.random.default_rng(2)
+    for kind in ("blendshape", "simulation"):
+        sm = m.surface_model(kind)
+        p0 = m.parameters({"lipCornerPull_L": 0.5, "jaw": [0.04, 0, 0, 0, 0, 0]})
+        x = sm.surface(p0)
+        assert x.shape == m.neutral.shape
+        gx = rng.standard_normal(x.shape)
+        p = Float(p0.astype(np.float32))
+        dr.enable_grad(p)
+        flat = SurfaceFunctionFor(sm)(p)
+        dr.backward(dr.sum(flat * Float(gx.reshape(-1).astype(np.float32))))
+        ref = sm.surface_vjp(p0, gx)
+        assert np.abs(np.array(p.grad) - ref).max() <= 1e-5 * np.abs(ref).max(), kind
+        J = sm.surface_jacobian(p0)
+        assert np.abs(np.einsum("pvi,vi->p", J, gx) - ref).max() <= 1e-8 * np.abs(ref).max(), kind
+        # forward-mode through the op gives the tangent Jacobian
+        p2 = Float(p0.astype(np.float32))
+        dr.enable_grad(p2)
+        flat2 = SurfaceFunctionFor(sm)(p2)
+        dp = np.zeros_like(p0)
+        dp[0] = 1.0
+        dr.set_grad(p2, Float(dp.astype(np.float32)))
+        fwd = np.array(dr.forward_to(flat2)).reshape(-1, 3)
+        assert np.abs(fwd - J[0]).max() <= 1e-5 * np.abs(J[0]).max() + 1e-12, kind
+    bs = m.surface_model("blendshape")
+    p0 = m.parameters({"lipCornerPull_L": 0.5, "jaw": [0.1, 0.02, 0, 0.001, 0, 0]})
+    J = bs.surface_jacobian(p0)
+    for i in (0, len(p0) - 6, len(p0) - 5, len(p0) - 3):
+        e = np.zeros_like(p0)
+        e[i] = 1e-6
+        fd = (bs.surface(p0 + e) - bs.surface(p0 - e)) / 2e-6
+        assert np.abs(fd - J[i]).max() <= 1e-6 * np.abs(J[i]).max()
+    assert np.allclose(m.surface({"lipCornerPull_L": 0.5}, kind="simulation"),
+                       m.surface_model("simulation").surface(m.parameters({"lipCornerPull_L": 0.5})))
+
+
+def SurfaceFunctionFor(sm):
+    from invface.bridge import SurfaceFunction
+    return SurfaceFunction(sm)
+
+
+def test_bad_controls_are_rejected(driven, small_expressive_model):
+    with pytest.raises(ControlsError, match="expected"):
+        driven.solve(np.zeros(3))
+    p = np.zeros(len(driven.parameter_names))
+    p[2] = np.nan
+    with pytest.raises(ControlsError, match="non-finite"):
+        driven.solve(p)
+    with pytest.raises(InvfaceError, match="unknown blendshape"):
+        small_expressive_model.surface({"smile": 1.0}, kind="simulation")
