@@ -75,7 +75,8 @@ def _read_activations(path):
 
 
 def cmd_simulate(args):
-    """Pose the model by muscle activations (and jaw), report the solve, render a preview."""
+    """Pose the model by muscle activations (and jaw), or by blendshape weights through the
+    blendshape-driven muscle simulation; report the solve, render a preview."""
     import numpy as np
 
     from .sim.quasistatic import Simulator
@@ -86,10 +87,31 @@ def cmd_simulate(args):
     if args.jaw is not None:
         jaw = [args.jaw, 0, 0, 0, 0, 0]
     model = _load_model(args.model, args.resolution)
-    sim = Simulator(model)
-    res = sim.solve(acts, jaw=jaw, progress=lambda i, r: print(f"  .. Newton {i}: relative residual {r:.2e}", flush=True))
+    progress = lambda i, r: print(f"  .. Newton {i}: relative residual {r:.2e}", flush=True)  # noqa: E731
+    if args.weight:
+        if acts:
+            raise InvfaceError("give muscle activations (--activations/--set) or blendshape weights "
+                               "(--weight), not both: with weights the activations follow from the tracks")
+        weights = {}
+        for item in args.weight:
+            name, _, value = item.partition("=")
+            try:
+                weights[name] = float(value)
+            except ValueError:
+                raise InvfaceError(f"--weight {item}: expected NAME=NUMBER") from None
+        ds = model.surface_model("simulation")
+        p = model.parameters({"weights": weights, "jaw": jaw if jaw is not None else np.zeros(6)})
+        r = ds.solve(p, warm=None, progress=progress)
+        res, sim, x = r.sim, ds.sim, ds.surface_of(r)
+        a = r.tracks.activations
+        top = [i for i in np.argsort(-a) if a[i] > 0.01][:8]
+        print("muscle activations from the tracks: "
+              + (", ".join(f"{model.muscles[i].name} {a[i]:.2f}" for i in top) or "none"))
+    else:
+        sim = Simulator(model)
+        res = sim.solve(acts, jaw=jaw, progress=progress)
+        x = sim.surface(res)
     print(res.report())
-    x = sim.surface(res)
     d = np.linalg.norm(x - model.neutral, axis=1)
     dv = sim.volume_change(res)
     print(f"skin displacement: max {d.max() * 1000:.2f} mm, mean {d.mean() * 1000:.2f} mm; "
@@ -144,6 +166,9 @@ def cmd_demo(args):
     if model.blendshape_names:
         from .report.expressions import write_expression_sheet
         print(f"expression contact sheet: {write_expression_sheet(model, out / 'expressions.png')}")
+        print("the same shapes through the blendshape-driven muscle simulation", flush=True)
+        sheet = write_expression_sheet(model, out / "expressions_simulation.png", kind="simulation")
+        print(f"simulation contact sheet: {sheet}")
     (out / "summary.json").write_text(json.dumps(model.summary(), indent=2))
     print(f"wrote {out / 'template_head.npz'}, {len(paths)} preview images; open {paths[-1]}")
     return 0
@@ -161,11 +186,14 @@ def build_parser():
     b.add_argument("-o", "--output", help="write the bundle here (.npz)")
     b.add_argument("--preview", metavar="DIR", help="write preview images into DIR")
     b.set_defaults(func=cmd_build_model)
-    s = sub.add_parser("simulate", help="pose the model by muscle activations (quasistatic simulation)")
+    s = sub.add_parser("simulate", help="pose the model by muscle activations or blendshape-driven tracks "
+                                        "(quasistatic simulation)")
     s.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
     s.add_argument("--resolution", type=float, default=1.0, help="template size factor when no --model")
     s.add_argument("--activations", help='JSON file: {"activations": {"zygomaticus_major_L": 0.8, ...}, "jaw": [6]}')
     s.add_argument("--set", action="append", metavar="MUSCLE=A", help="set one activation (repeatable)")
+    s.add_argument("--weight", action="append", metavar="SHAPE=W",
+                   help="blendshape weight driving the muscle tracks (repeatable; paper 000 Sec. 6)")
     s.add_argument("--jaw", type=float, help="jaw opening angle (rad) about the hinge")
     s.add_argument("-o", "--output", help="write the posed skin mesh (OBJ/PLY)")
     s.add_argument("--preview", help="write a PNG: neutral (top) and posed (bottom), front and 3/4")

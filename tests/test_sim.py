@@ -264,3 +264,10 @@ def test_cli_simulate(small_expressive_model, tmp_path, capsys):
     bad.write_text("{not json")
     assert main(["simulate", "--model", str(path), "--activations", str(bad)]) == 2
     assert "bad.json" in capsys.readouterr().err
+    # blendshape-driven: weights drive the tracks, the activations are read out
+    rc = main(["simulate", "--model", str(path), "--weight", "lipCornerPull_L=1", "-o", str(tmp_path / "w.obj")])
+    out = capsys.readouterr().out
+    assert rc == 0 and "zygomaticus_major_L" in out and "converged" in out and (tmp_path / "w.obj").exists()
+    assert main(["simulate", "--model", str(path), "--weight", "smile=1"]) == 2
+    assert "unknown blendshape" in capsys.readouterr().err
+    assert main(["simulate", "--model", str(path), "--weight", "lipCornerPull_L=1", "--set", "mentalis_L=0.2"]) == 2

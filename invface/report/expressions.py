@@ -23,8 +23,11 @@ def view_tiles(model, x, size=256, spp=8):
     return [to_srgb8(render_meshes([(x, model.triangles, SKIN)], cam)) for cam in cams]
 
 
-def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None):
-    """Render neutral + every blendshape (front and 3/4) into one labelled PNG; returns path."""
+def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None, kind="blendshape"):
+    """Render neutral + every blendshape (front and 3/4) into one labelled PNG; returns path.
+
+    kind: the surface model that poses each shape ('blendshape', or 'simulation' for the
+    blendshape-driven muscle simulation, paper 000 Sec. 6)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -37,7 +40,7 @@ def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None):
     for i, name in enumerate(names):
         if progress:
             progress(f"render {name}")
-        x = model.neutral if name == "neutral" else model.surface(blendshape_pose(model, name))
+        x = model.neutral if name == "neutral" else model.surface(blendshape_pose(model, name), kind=kind)
         ax = np.ravel(axes)[i]
         ax.imshow(np.concatenate(view_tiles(model, x, size, spp), 1))
         ax.set_title(name, fontsize=9)

@@ -1,0 +1,86 @@
+"""Derivative benchmark for the driven simulation x(w) (issue 4).
+
+    python bench/gradient.py [--resolution 1]
+
+Prints for the template: the Poisson precompute seconds (Eq. 10-11, all K blendshapes),
+the forward solve (cold from rest and warm), the adjoint gradient of a surface loss
+(Sensitivity set-up + factorisation + one back-substitution), the full Jacobian (all K+6
+controls by tangent solves) and the gradient/forward ratio; then the same gradient for a
+model with twice as many blendshapes, to show that its cost does not grow with K.
+"""
+import argparse
+import copy
+import time
+
+import numpy as np
+
+import invface
+from invface.sim.adjoint import Sensitivity
+from invface.sim.driven import DrivenSimulation
+from invface.sim.poisson import track_displacements
+
+
+def timed(fn):
+    t = time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - t
+
+
+def controls(ds):
+    names = ds.parameter_names
+    p = np.zeros(len(names))
+    for n, v in (("lipCornerPull_L", 0.7), ("lipCornerPull_R", 0.6), ("browInnerUp_L", 0.5),
+                 ("cheekRaise", 0.4), ("jaw_rx", 0.08)):
+        p[names.index(n)] = v
+    return p
+
+
+def gradient_seconds(ds, p, gx):
+    r = ds.solve(p, warm=None)
+    t = time.perf_counter()
+    S = Sensitivity(ds, r)
+    g = S.surface_gradient(gx)
+    return time.perf_counter() - t, r, g
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--resolution", type=float, default=1.0)
+    a = ap.parse_args()
+    model = invface.template.build(resolution=a.resolution)
+    K = len(model.blendshape_names)
+    print(f"template resolution {a.resolution:g}: {len(model.tets)} tets, {len(model.neutral)} surface "
+          f"vertices, K = {K} blendshapes")
+    _, t_poisson = timed(lambda: track_displacements(model))
+    print(f"  Poisson precompute (factorise + {3 * K} right-hand sides): {t_poisson:.2f} s")
+    ds, t_setup = timed(lambda: DrivenSimulation(model))
+    p = controls(ds)
+    r, t_cold = timed(lambda: ds.solve(p, warm=None))
+    p2 = p.copy()
+    p2[0] += 0.05
+    rw, t_warm = timed(lambda: ds.solve(p2, warm=r))
+    print(f"  set-up {t_setup:.2f} s; forward cold {t_cold:.2f} s ({r.sim.iterations} it), "
+          f"warm {t_warm:.2f} s ({rw.sim.iterations} it)")
+    gx = np.random.default_rng(0).standard_normal(model.neutral.shape)
+    t_grad, r, g = gradient_seconds(ds, p, gx)
+    S = Sensitivity(ds, r)
+    S.res.sim.solver                                     # factorised already: Jacobian cost alone
+    _, t_jac = timed(S.surface_jacobian)
+    print(f"  adjoint gradient {t_grad:.2f} s (ratio gradient/forward {t_grad / t_cold:.2f} cold, "
+          f"{t_grad / t_warm:.2f} warm); full Jacobian ({K + 6} controls) {t_jac:.2f} s")
+
+    big = copy.copy(model)
+    big._surface_models = {}
+    big.blendshape_names = model.blendshape_names + [n + "_copy" for n in model.blendshape_names]
+    big.blendshapes = np.concatenate([model.blendshapes, 0.5 * model.blendshapes])
+    big.blendshape_activations = np.concatenate([model.blendshape_activations] * 2)
+    big.track_displacements = np.concatenate([model.track_displacements, 0.5 * model.track_displacements])
+    ds2 = DrivenSimulation(big)
+    p_big = np.concatenate([p[:K], np.zeros(K), p[K:]])
+    t_grad2, _, g2 = gradient_seconds(ds2, p_big, gx)
+    print(f"  with 2K = {2 * K} blendshapes: adjoint gradient {t_grad2:.2f} s (K: {t_grad:.2f} s); "
+          f"same gradient on the first K: {np.abs(g2[:K] - g[:K]).max() / np.abs(g).max():.1e} rel")
+
+
+if __name__ == "__main__":
+    main()
