@@ -167,7 +167,8 @@ def cmd_demo(args):
         from .report.expressions import write_expression_sheet
         print(f"expression contact sheet: {write_expression_sheet(model, out / 'expressions.png')}")
         print("the same shapes through the blendshape-driven muscle simulation", flush=True)
-        sheet = write_expression_sheet(model, out / "expressions_simulation.png", kind="simulation")
+        sheet = write_expression_sheet(model, out / "expressions_simulation.png", kind="simulation",
+                                       progress=lambda msg: print(f"  .. {msg}", flush=True))
         print(f"simulation contact sheet: {sheet}")
     (out / "summary.json").write_text(json.dumps(model.summary(), indent=2))
     print(f"wrote {out / 'template_head.npz'}, {len(paths)} preview images; open {paths[-1]}")

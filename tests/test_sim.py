@@ -7,7 +7,7 @@ from invface.errors import InvfaceError, MeshError
 from invface.sim import materials
 from invface.sim.fem import Elements, FleshModel, Pattern
 from invface.sim.quasistatic import Simulator
-from invface.sim.tracks import Tracks, activation_from_length, centerline_length
+from invface.sim.tracks import MuscleTracks, Tracks, activation_from_length
 
 MAT = materials.Material()
 
@@ -109,18 +109,22 @@ def test_psd_projection_and_tracks():
 
 
 def test_centerline_length_and_activation_curve(small_model):
-    mus = small_model.muscles[0]
-    L, dL = centerline_length(mus.centerline)
-    assert np.isclose(L, mus.rest_length)
-    C = mus.centerline + 1e-3 * np.random.default_rng(4).standard_normal(mus.centerline.shape)
-    L1, dL1 = centerline_length(C)
-    dC = np.random.default_rng(5).standard_normal(C.shape)
+    m = small_model
+    tr = MuscleTracks(m, np.zeros((0, len(m.rest_positions), 3)), np.ones(len(m.rest_positions), bool), 1.0)
+    L, _ = tr.lengths(tr.rest_centerlines)
+    assert np.allclose(L, [mu.rest_length for mu in m.muscles], rtol=1e-12)
+    rng = np.random.default_rng(4)
+    C = tr.rest_centerlines + 1e-3 * rng.standard_normal(tr.rest_centerlines.shape)
+    _, dL = tr.lengths(C)
+    dC = rng.standard_normal(C.shape)
     h = 1e-7
-    assert np.isclose((centerline_length(C + h * dC)[0] - centerline_length(C - h * dC)[0]) / (2 * h),
-                      np.sum(dL1 * dC), rtol=1e-6)
-    a, da = activation_from_length(mus, 0.75 * L)
-    assert np.isclose(a, 0.5) and np.isclose(da, -2.0 / L)
-    assert activation_from_length(mus, 1.2 * L)[0] == 0.0
+    fd = (tr.lengths(C + h * dC)[0] - tr.lengths(C - h * dC)[0]) / (2 * h)
+    assert np.allclose(fd, np.bincount(tr.owner, np.sum(dL * dC, 1), minlength=len(L)), rtol=1e-6)
+    mus = m.muscles[0]
+    L0 = mus.rest_length
+    a, da = activation_from_length(mus, 0.75 * L0)
+    assert np.isclose(a, 0.5) and np.isclose(da, -2.0 / L0)
+    assert activation_from_length(mus, 1.2 * L0)[0] == 0.0
 
 
 @pytest.fixture(scope="module")

@@ -8,26 +8,28 @@ from __future__ import annotations
 import numpy as np
 
 
-def euler_xyz(theta):
-    """Rotation matrix (3,3) R = Rz(t2) Ry(t1) Rx(t0) for Euler angles theta (3,) in radians."""
+def _axis_rotations(theta):
+    """Rx(t0), Ry(t1), Rz(t2) and their derivatives in their own angle."""
     cx, cy, cz = np.cos(theta)
     sx, sy, sz = np.sin(theta)
-    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    R = (np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]]),
+         np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]]),
+         np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]]))
+    dR = (np.array([[0, 0, 0], [0, -sx, -cx], [0, cx, -sx]]),
+          np.array([[-sy, 0, cy], [0, 0, 0], [-cy, 0, -sy]]),
+          np.array([[-sz, -cz, 0], [cz, -sz, 0], [0, 0, 0]]))
+    return R, dR
+
+
+def euler_xyz(theta):
+    """Rotation matrix (3,3) R = Rz(t2) Ry(t1) Rx(t0) for Euler angles theta (3,) in radians."""
+    (Rx, Ry, Rz), _ = _axis_rotations(theta)
     return Rz @ Ry @ Rx
 
 
 def euler_xyz_derivatives(theta):
     """dR/dtheta_i (3,3,3) of ``euler_xyz`` (index 0: the angle)."""
-    cx, cy, cz = np.cos(theta)
-    sx, sy, sz = np.sin(theta)
-    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    dRx = np.array([[0, 0, 0], [0, -sx, -cx], [0, cx, -sx]])
-    dRy = np.array([[-sy, 0, cy], [0, 0, 0], [-cy, 0, -sy]])
-    dRz = np.array([[-sz, -cz, 0], [cz, -sz, 0], [0, 0, 0]])
+    (Rx, Ry, Rz), (dRx, dRy, dRz) = _axis_rotations(theta)
     return np.array([Rz @ Ry @ dRx, Rz @ dRy @ Rx, dRz @ Ry @ Rx])
 
 

@@ -12,24 +12,12 @@ import numpy as np
 from ..errors import InvfaceError
 
 
-def centerline_length(C):
-    """Polyline length L (Eq. 9) of centre-lines C (..., P, 3) in metres, and dL/dC (..., P, 3)."""
-    C = np.asarray(C, float)
-    seg = np.diff(C, axis=-2)
-    n = np.linalg.norm(seg, axis=-1, keepdims=True)
-    u = seg / np.maximum(n, 1e-15)
-    dL = np.zeros_like(C)
-    dL[..., :-1, :] -= u
-    dL[..., 1:, :] += u
-    return n[..., 0].sum(-1), dL
-
-
 def activation_from_length(muscle, length):
     """Activation a_m(L) and its slope da/dL (1/m) from the muscle's activation-length curve."""
     c = muscle.activation_curve
     L0 = muscle.rest_length
     s = np.asarray(length, float) / L0
-    a = np.interp(s, c[:, 0], c[:, 1])
+    a = muscle.activation(length)
     slopes = np.diff(c[:, 1]) / np.diff(c[:, 0])
     k = np.clip(np.searchsorted(c[:, 0], s, side="right") - 1, 0, len(slopes) - 1)
     inside = (s > c[0, 0]) & (s < c[-1, 0])
