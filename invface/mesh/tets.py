@@ -90,6 +90,12 @@ def barycentric(X, tets, tet_ids, points):
     return np.concatenate([1 - lam.sum(1, keepdims=True), lam], axis=1)
 
 
+def mean_edge_length(X, tets):
+    """Mean length (m) of the six edges of every tet (edges shared by tets count per tet)."""
+    e = X[tets[:, [0, 0, 0, 1, 1, 2]]] - X[tets[:, [1, 2, 3, 2, 3, 3]]]
+    return float(np.linalg.norm(e, axis=2).mean())
+
+
 def shape_gradients(X, tets):
     """Gradients of the 4 linear shape functions per tet (T,4,3) and rest volumes (T,)."""
     p = X[tets]

@@ -59,8 +59,8 @@ class DrivenSimulation:
         K, N = len(model.blendshape_names), len(model.rest_positions)
         if dX is None or np.shape(dX) != (K, N, 3):
             dX = track_displacements(model)
-        shear = 2 * (self.sim.material.mu10 + self.sim.material.mu01)
-        k = track_stiffness if track_stiffness is not None else 2.0 * shear * self.sim.edge_length
+        k = track_stiffness if track_stiffness is not None else \
+            2.0 * self.sim.material.shear_modulus * self.sim.edge_length
         self.tracks = MuscleTracks(model, dX, self.sim.dof_of_vertex >= 0, k)
         self.parameter_names = list(model.blendshape_names) + JAW_NAMES
         self.n_blendshapes = K
@@ -90,8 +90,9 @@ class DrivenSimulation:
         return self.W @ result.X
 
     def surface(self, p):
-        """Render-surface vertices (V,3) m for parameters p (warm-started)."""
-        return self.surface_of(self.solve(p))
+        """Render-surface vertices (V,3) m for parameters p (warm-started; no new solve when p
+        is the last one)."""
+        return self.surface_of(self.result_at(p))
 
     def result_at(self, p):
         """The DrivenResult at p: the last one when p is unchanged, else a new (warm) solve."""

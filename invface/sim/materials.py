@@ -56,6 +56,11 @@ class Material:
     def as_dict(self):
         return asdict(self)
 
+    @property
+    def shear_modulus(self):
+        """Small-strain shear modulus 2 (mu10 + mu01) (Pa)."""
+        return 2 * (self.mu10 + self.mu01)
+
     def params(self):
         """The constants as the float64 array (7,) the kernels take, in field order."""
         return np.array([self.mu10, self.mu01, self.kappa, self.sigma_max,

@@ -22,7 +22,7 @@ from scipy.sparse.linalg import splu
 
 from ..errors import InvfaceError
 from ..mesh.closest import closest_points
-from ..mesh.tets import boundary_faces, laplacian
+from ..mesh.tets import boundary_faces, laplacian, mean_edge_length
 
 
 def outer_boundary(model):
@@ -35,8 +35,7 @@ def outer_boundary(model):
     bone[model.fixed_cranium] = True
     bone[model.fixed_jaw] = True
     cand = cand[~bone[cand]]
-    edges = X0[tets[:, [0, 0, 0, 1, 1, 2]]] - X0[tets[:, [1, 2, 3, 2, 3, 3]]]
-    tol = 0.25 * float(np.linalg.norm(edges, axis=2).mean())
+    tol = 0.25 * mean_edge_length(X0, tets)
     tri, w, d = closest_points(X0[cand], model.neutral, model.triangles)
     on = d <= tol
     if not on.any():

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InvfaceError, MeshError
-from ..mesh.tets import face_use
+from ..mesh.tets import face_use, mean_edge_length
 from . import linsolve
 from .collisions import Collisions, ContactSet
 from .fem import Elements, FleshModel, Pattern
@@ -128,9 +128,8 @@ class Simulator:
             np.concatenate([m.fibers for m in model.muscles]) if ft else np.zeros((0, 3)),
             np.repeat(np.arange(len(ft)), [len(t) for t in ft]))
 
-        edges = X0[tets[:, [0, 0, 0, 1, 1, 2]]] - X0[tets[:, [1, 2, 3, 2, 3, 3]]]
-        self.edge_length = float(np.linalg.norm(edges, axis=2).mean())
-        shear = 2 * (self.material.mu10 + self.material.mu01)
+        self.edge_length = mean_edge_length(X0, tets)
+        shear = self.material.shear_modulus
         self.collisions = None
         if contact:
             k = contact_stiffness or 50.0 * shear * self.edge_length
@@ -138,7 +137,7 @@ class Simulator:
         pairs = self.collisions.coupled_pairs() if self.collisions else None
         self.pattern = Pattern(dof, tets, pairs)
         self._solver_name = solver
-        self._solver = linsolve.make_solver(self.pattern, solver)      # symbolic analysis once
+        self._solver = self.make_solver()                                # symbolic analysis once
         # contact planes are re-detected after a Newton step that moved some vertex by more than
         # refresh_distance (m), during the first refresh_iterations iterations
         self.refresh_iterations, self.refresh_distance = 10, 0.05 * self.edge_length
