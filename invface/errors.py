@@ -27,3 +27,11 @@ class ConfigError(InvfaceError):
 
 class DependencyError(InvfaceError):
     """A required system component (LLVM for Dr.Jit, a solver) cannot be found."""
+
+
+class ImageError(InvfaceError):
+    """An image or plate is unreadable, truncated, non-finite or the wrong size."""
+
+
+class CameraError(InvfaceError):
+    """A camera file is missing fields, malformed, or disagrees with its plate."""
