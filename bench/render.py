@@ -143,7 +143,7 @@ def _ply(V, F):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", nargs="+", default=["360x270", "720x540"])
-    ap.add_argument("--settings", nargs="+", default=["1:0.25", "2:0.5", "4:1"],
+    ap.add_argument("--settings", nargs="+", default=["1:0.25", "4:0.5", "8:0.5", "16:1"],
                     help="spp:silhouette_spp pairs")
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--compare-prb", action="store_true")

@@ -152,6 +152,73 @@ def _write_pose_preview(model, x, path):
     os.replace(tmp, path)
 
 
+def _pose(values, option="--pose"):
+    import numpy as np
+    if values is None:
+        return np.zeros(3), np.zeros(3)
+    v = np.asarray(values, float)
+    if v.shape != (6,) or not np.all(np.isfinite(v)):
+        raise InvfaceError(f"{option} needs 6 finite numbers: rx ry rz (rad) tx ty tz (m)")
+    return v[:3], v[3:]
+
+
+def run_calibration(model, plate, out, rotation, translation, lam, max_iter):
+    """Eq. 14 on a loaded plate with a progress bar; writes out (.npz) and out's _compare.png."""
+    from tqdm import tqdm
+
+    from .fit.calibrate import calibrate, comparison_image
+    from .render.plates import write_image
+    out = Path(out)
+    bar = tqdm(total=max_iter, desc="calibrate lighting/albedo", unit="it", leave=False)
+
+    def progress(h):
+        bar.update(1)
+        bar.set_postfix(rms=f"{h['rms']:.4f}")
+    try:
+        cal = calibrate(model.triangles, model.neutral, plate.image, plate.camera, rotation,
+                        translation, lam=lam, mask=plate.mask, max_iter=max_iter, progress=progress)
+    finally:
+        bar.close()
+    cal.plate = plate.path
+    out.parent.mkdir(parents=True, exist_ok=True)
+    cal.save(out)
+    h = cal.history[-1]
+    compare = write_image(out.with_name(out.stem + "_compare.png"),
+                          comparison_image(model.triangles, model.neutral, cal, plate.image))
+    print(f"calibrated in {len(cal.history)} iterations, {h['seconds']:.1f} s: pixel RMS {h['rms']:.4f} "
+          f"(linear), light DC {cal.gamma[0].round(3).tolist()}")
+    print(f"wrote {out} and {compare} (plate | render | 4x difference)")
+    return cal
+
+
+def cmd_calibrate(args):
+    """Lighting and albedo calibration (Eq. 14) on a neutral plate."""
+    from .render.plates import load_plate
+    model = _load_model(args.model, args.resolution)
+    plate = load_plate(args.plate, camera=args.camera)
+    rotation, translation = _pose(args.pose)
+    run_calibration(model, plate, args.output, rotation, translation, args.lam, args.max_iter)
+    return 0
+
+
+def cmd_camera_calibrate(args):
+    """Camera intrinsics and distortion from checkerboard photographs."""
+    from .render.checkerboard import calibrate
+    try:
+        inner = tuple(int(v) for v in args.board.lower().split("x"))
+        assert len(inner) == 2 and min(inner) >= 2
+    except (ValueError, AssertionError):
+        raise InvfaceError(f"--board {args.board!r}: give inner corners as COLSxROWS, e.g. 9x6") from None
+    cam, rms, used = calibrate(args.images, inner=inner, square=args.square,
+                               distortion=not args.no_distortion)
+    cam.save(args.output)
+    print(f"board found in {len(used)} of {len(args.images)} images; reprojection RMS {rms:.3f} px")
+    print(f"fx {cam.K[0, 0]:.1f} fy {cam.K[1, 1]:.1f} cx {cam.K[0, 2]:.1f} cy {cam.K[1, 2]:.1f} px; "
+          f"dist {[round(float(d), 4) for d in cam.dist]}")
+    print(f"wrote {args.output}")
+    return 0
+
+
 def cmd_demo(args):
     """Until fitting lands: build the template, pose the jaw, write previews."""
     from . import template
@@ -172,7 +239,34 @@ def cmd_demo(args):
         print(f"simulation contact sheet: {sheet}")
     (out / "summary.json").write_text(json.dumps(model.summary(), indent=2))
     print(f"wrote {out / 'template_head.npz'}, {len(paths)} preview images; open {paths[-1]}")
+    _demo_calibration(model, out)
     return 0
+
+
+def _demo_calibration(model, out):
+    """Render a synthetic neutral plate with a known light and albedo, calibrate on it."""
+    import numpy as np
+
+    from .render.camera import Camera
+    from .render.plates import Plate, write_image
+    from .render.shading import vertex_normals, irradiance
+    from .render.synthetic import render_plate, skin_albedo, studio_light
+    print("lighting/albedo calibration (Eq. 14) on a synthetic neutral plate", flush=True)
+    cam = Camera.front_view(720, 540)
+    rot, tr = np.array([0.03, -0.12, 0.0]), np.array([0.0, 0.0, 0.0])
+    gamma, albedo = studio_light(), skin_albedo(model)
+    image, _ = render_plate(model, model.neutral, cam, gamma, albedo, rot, tr)
+    plate_path = write_image(out / "plates" / "neutral.exr", image)
+    cam.save(out / "plates" / "neutral.json")
+    cal = run_calibration(model, Plate(image=image, camera=cam, path=str(plate_path)),
+                          out / "calib.npz", rot, tr, 2500.0, 30)
+    from .model.rig import euler_xyz
+    n = vertex_normals(model.neutral @ euler_xyz(rot).T + tr, model.triangles)
+    E, Ef = irradiance(n, gamma), irradiance(n, cal.gamma)
+    k = albedo.mean(0) / cal.albedo.mean(0)
+    print(f"against the truth: irradiance {100 * np.sqrt(np.mean((E - Ef) ** 2) / np.mean(E ** 2)):.2f} % RMS, "
+          f"albedo {100 * np.sqrt(np.mean((cal.albedo * k - albedo) ** 2) / np.mean(albedo ** 2)):.2f} % RMS "
+          "(all vertices, up to the light/albedo scale)")
 
 
 def build_parser():
@@ -199,6 +293,27 @@ def build_parser():
     s.add_argument("-o", "--output", help="write the posed skin mesh (OBJ/PLY)")
     s.add_argument("--preview", help="write a PNG: neutral (top) and posed (bottom), front and 3/4")
     s.set_defaults(func=cmd_simulate)
+    c = sub.add_parser("calibrate", help="solve SH lighting and per-vertex albedo on a neutral plate (Eq. 14)")
+    c.add_argument("plate", help="plate image (PNG/JPEG sRGB or linear EXR)")
+    c.add_argument("--camera", help="JSON camera file (default: PLATE.json beside the plate, else the "
+                                    "front view)")
+    c.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
+    c.add_argument("--resolution", type=float, default=1.0, help="template size factor when no --model")
+    c.add_argument("--pose", type=float, nargs=6, metavar=("RX", "RY", "RZ", "TX", "TY", "TZ"),
+                   help="rigid head pose: Euler XYZ (rad) and translation (m); default identity")
+    c.add_argument("--lam", type=float, default=2500.0, help="albedo smoothness weight lambda (paper: 2500)")
+    c.add_argument("--max-iter", type=int, default=30, help="Gauss-Newton iterations at most")
+    c.add_argument("-o", "--output", default="calib.npz", help="calibration file to write (.npz)")
+    c.set_defaults(func=cmd_calibrate)
+    cam = sub.add_parser("camera", help="camera tools")
+    camsub = cam.add_subparsers(dest="camera_command", required=True)
+    cc = camsub.add_parser("calibrate", help="intrinsics and distortion from checkerboard images (OpenCV)")
+    cc.add_argument("images", nargs="+", help="checkerboard photographs")
+    cc.add_argument("--board", default="9x6", help="inner corners COLSxROWS (default 9x6)")
+    cc.add_argument("--square", type=float, default=0.025, help="square size in metres")
+    cc.add_argument("--no-distortion", action="store_true", help="fit K only")
+    cc.add_argument("-o", "--output", default="camera.json", help="JSON camera file to write")
+    cc.set_defaults(func=cmd_camera_calibrate)
     d = sub.add_parser("demo", help="run the main job on the built-in model")
     d.add_argument("--out", default="reports/demo", help="output folder")
     d.set_defaults(func=cmd_demo)

@@ -106,6 +106,41 @@ class FaceRenderer:
         return self.integrator.render_attached(self.scene, self.sensor, seed,
                                                self.spp if spp is None else int(spp), edges)
 
+    def coverage(self, x, rotation=None, translation=None, samples=3):
+        """The linear image operator of the current geometry: image = W @ vertex radiance.
+
+        Casts ``samples`` x ``samples`` rays per pixel (fixed stratified positions) through
+        the posed mesh with Mitsuba and interpolates barycentrically, as the renderer does.
+        Returns (pixels (M,) flat indices row*W+col of the pixels whose every ray hits the
+        face, W scipy CSR (M, V) of barycentric weights / samples^2)."""
+        import scipy.sparse as sp
+        mi, dr = self.mi, self.dr
+        with dr.suspend_grad():
+            xr = self.vertex_radiance(np.asarray(x, np.float32), np.zeros(27),
+                                      np.zeros((self.vertex_count, 3)), rotation, translation)[0]
+            self.params["face.vertex_positions"] = xr
+            self.params.update()
+            w, h = self.camera.size
+            k = int(samples)
+            off = (np.arange(k) + 0.5) / k
+            py, px = np.divmod(np.arange(w * h), w)
+            sx = (px[:, None, None] + off[None, None, :]).repeat(k, 1).reshape(-1) / w
+            sy = (py[:, None, None] + off[None, :, None]).repeat(k, 2).reshape(-1) / h
+            ray, _ = self.sensor.sample_ray(0.0, 0.0, mi.Point2f(sx.astype(np.float32), sy.astype(np.float32)),
+                                            mi.Point2f(0.5))
+            pi = self.scene.ray_intersect_preliminary(ray, coherent=True)
+            valid = np.array(pi.is_valid(), bool)
+            prim = np.array(pi.prim_index, np.int64)
+            uv = np.array(pi.prim_uv, np.float64).T
+        full = valid.reshape(-1, k * k).all(1)
+        pixels = np.flatnonzero(full)
+        sel = np.repeat(full, k * k)
+        tri = np.asarray(self.faces).reshape(-1, 3)[prim[sel]]
+        b = np.stack([1 - uv[sel, 0] - uv[sel, 1], uv[sel, 0], uv[sel, 1]], 1) / (k * k)
+        rows = np.repeat(np.arange(len(pixels)), k * k * 3)
+        W = sp.csr_matrix((b.ravel(), (rows, tri.ravel())), shape=(len(pixels), self.vertex_count))
+        return pixels, W
+
     def image(self, x, gamma, albedo, rotation=None, translation=None, seed=None, spp=None):
         """numpy (H, W, 4) float32 render (no gradients)."""
         with self.dr.suspend_grad():

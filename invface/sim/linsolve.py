@@ -124,6 +124,36 @@ def available():
     return names + ["superlu"]
 
 
+class MatrixPattern:
+    """The upper-triangular CSR pattern of a symmetric scipy sparse matrix, for solvers of
+    matrices other than the FEM Newton matrix (``fem.Pattern``): same interface."""
+
+    def __init__(self, A):
+        import scipy.sparse as sp
+        U = sp.triu(sp.csr_matrix(A), format="csr")
+        U.sum_duplicates()
+        U.sort_indices()
+        self.n, self.nnz = U.shape[0], U.nnz
+        self.indptr, self.indices = U.indptr.astype(np.int64), U.indices.astype(np.int64)
+        rows = np.repeat(np.arange(self.n), np.diff(self.indptr))
+        self._keys = rows * self.n + self.indices            # sorted (CSR, sorted indices)
+
+    def values(self, B):
+        """Values (nnz,) of symmetric ``B`` (pattern within this one's) in pattern order."""
+        import scipy.sparse as sp
+        V = sp.triu(sp.coo_matrix(B))
+        keys = V.row.astype(np.int64) * self.n + V.col
+        slot = np.searchsorted(self._keys, keys)
+        if np.any(slot >= self.nnz) or np.any(self._keys[np.minimum(slot, self.nnz - 1)] != keys):
+            raise InvfaceError("matrix has entries outside the analysed sparsity pattern")
+        return np.bincount(slot, V.data, minlength=self.nnz)
+
+    def matrix(self, data, full=False):
+        import scipy.sparse as sp
+        U = sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
+        return (U + U.T - sp.diags(U.diagonal())).tocsr() if full else U
+
+
 def make_solver(pattern, name=None):
     """A solver for ``pattern`` (fem.Pattern): name or INVFACE_SOLVER, else the best available."""
     name = name or os.environ.get("INVFACE_SOLVER") or available()[0]
