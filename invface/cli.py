@@ -60,14 +60,8 @@ def _load_model(path, resolution):
 def _read_activations(path):
     """{muscle: activation} and optional jaw (6,) from a JSON file {"activations": {...}, "jaw": [...]}
     (a plain {muscle: value} mapping is accepted too)."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise InvfaceError(f"{path}: no such file") from None
-    except (OSError, ValueError) as e:
-        raise InvfaceError(f"{path}: not a readable JSON file ({e})") from None
-    if not isinstance(data, dict):
-        raise InvfaceError(f"{path}: expected a JSON object of muscle activations")
+    from .jsonfile import read_object
+    data = read_object(path, what="activations file")
     acts = data.get("activations", {k: v for k, v in data.items() if k != "jaw"})
     if not isinstance(acts, dict):
         raise InvfaceError(f"{path}: 'activations' must be an object {{muscle name: value}}")

@@ -31,3 +31,37 @@ def test_cli_reports_a_bad_bundle_in_one_line(tmp_path):
 def test_bad_resolution_is_a_clear_error():
     r = run("build-model", "--template", "--resolution", "1000")
     assert r.returncode == 2 and "resolution" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_calibrate_command_writes_calibration_and_comparison(small_expressive_model, tmp_path):
+    from invface.fit.calibrate import Calibration
+    from invface.render.camera import Camera
+    from invface.render.plates import write_image
+    from invface.render.synthetic import render_plate, skin_albedo, studio_light
+    m = small_expressive_model
+    cam = Camera.front_view(160, 120)
+    image, _ = render_plate(m, m.neutral, cam, studio_light(), skin_albedo(m), spp=16)
+    write_image(tmp_path / "neutral.png", image, bits=16)
+    cam.save(tmp_path / "neutral.json")                       # the sidecar camera
+    out = tmp_path / "calib.npz"
+    r = run("calibrate", str(tmp_path / "neutral.png"), "--resolution", str(SMALL_RESOLUTION),
+            "--max-iter", "10", "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "pixel RMS" in r.stdout
+    cal = Calibration.load(out, vertex_count=len(m.neutral))
+    assert cal.history[-1]["rms"] < 0.02 and cal.camera.size == (160, 120)
+    assert (tmp_path / "calib_compare.png").stat().st_size > 1000
+    # a camera of another size is refused in one line, naming the plate
+    Camera.front_view(200, 120).save(tmp_path / "other.json")
+    r = run("calibrate", str(tmp_path / "neutral.png"), "--camera", str(tmp_path / "other.json"),
+            "--resolution", str(SMALL_RESOLUTION), "-o", str(out))
+    assert r.returncode == 2 and "neutral.png: plate is 160x120" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_camera_calibrate_needs_the_board(tmp_path):
+    from invface.render.plates import write_image
+    for i in range(3):
+        write_image(tmp_path / f"b{i}.png", np.full((40, 50, 3), 0.5, np.float32))
+    r = run("camera", "calibrate", *[str(tmp_path / f"b{i}.png") for i in range(3)], "--board", "7x5",
+            "-o", str(tmp_path / "cam.json"))
+    assert r.returncode == 2 and "found in 0 of 3 images" in r.stderr and "Traceback" not in r.stderr

@@ -248,3 +248,16 @@ def test_flat_positions_with_two_consumers_get_both_gradients(grad_setup):
     g_render = s["grads"](V, g, c)[0]
     g_both = s["grads"](V, g, c, extra=lambda xs: 5.0 * dr.sum(dr.square(xs)))[0]
     np.testing.assert_allclose(g_both - g_render, 10.0 * V.ravel(), rtol=1e-3, atol=1e-4)
+
+
+def test_exported_scene_renders_the_same_image_in_stock_mitsuba(small_model, tmp_path):
+    cam = Camera.front_view(96, 72)
+    r = FaceRenderer(small_model.triangles, cam, spp=64)
+    albedo = np.tile([0.7, 0.5, 0.4], (len(small_model.neutral), 1))
+    ours = r.image(small_model.neutral, _light(), albedo, [0, 0.2, 0], [0.01, 0, 0])
+    xml = r.export_scene(tmp_path, small_model.neutral, _light(), albedo, [0, 0.2, 0], [0.01, 0, 0])
+    mi = r.mi
+    theirs = np.array(mi.render(mi.load_file(str(xml)), spp=64), np.float32)
+    assert np.abs(theirs[..., 3] - ours[..., 3]).mean() < 0.01
+    inside = (ours[..., 3] > 0.999) & (theirs[..., 3] > 0.999)
+    assert np.abs(theirs[inside, :3] - ours[inside, :3]).mean() < 0.01 * ours[inside, :3].mean()

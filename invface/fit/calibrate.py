@@ -54,7 +54,7 @@ from ..render.renderer import FaceRenderer
 from ..sim.linsolve import MatrixPattern, make_solver
 
 LAMBDA = 2500.0                            # paper 000, Eq. 14
-SKIN_ALBEDO = np.array([0.62, 0.45, 0.37])  # default mean albedo (gauge), linear RGB
+SKIN_ALBEDO = shading.SKIN_ALBEDO           # default mean albedo (the gauge)
 
 
 @dataclass

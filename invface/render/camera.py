@@ -66,16 +66,8 @@ class Camera:
     @classmethod
     def load(cls, path):
         """Read a JSON camera file; a missing or malformed field raises CameraError naming it."""
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise CameraError(f"{path}: camera file not found") from None
-        except (OSError, ValueError) as e:
-            raise CameraError(f"{path}: not a readable JSON camera file ({e})") from None
-        if not isinstance(data, dict):
-            raise CameraError(f"{path}: a camera file must hold a JSON object")
-        return cls.from_dict(data, source=str(path))
+        from ..jsonfile import read_object
+        return cls.from_dict(read_object(path, CameraError, "camera file"), source=str(path))
 
     @classmethod
     def from_dict(cls, data, source="camera"):
@@ -148,14 +140,6 @@ class Camera:
         """The same camera without lens distortion (the camera of an undistorted plate)."""
         return Camera(K=self.K.copy(), width=self.width, height=self.height,
                       dist=np.zeros(5), R=self.R.copy(), t=self.t.copy())
-
-    def scaled(self, factor):
-        """The camera of the plate resized by ``factor`` (pyramid levels, previews)."""
-        w, h = int(round(self.width * factor)), int(round(self.height * factor))
-        K = self.K.copy()
-        K[:2] *= [[w / self.width], [h / self.height]]
-        K[:2, 2] = (self.K[:2, 2] + 0.5) * [w / self.width, h / self.height] - 0.5
-        return Camera(K=K, width=w, height=h, dist=self.dist.copy(), R=self.R.copy(), t=self.t.copy())
 
     @property
     def center(self):

@@ -19,6 +19,8 @@ a (constant) weight.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ..errors import ConfigError
@@ -26,6 +28,25 @@ from .camera import Camera
 from .integrator import NAME, ATTRIBUTE, register
 from .shading import pose_dr, vertex_radiance_dr
 from .variant import mitsuba
+
+
+SCENE_TEMPLATE = Path(__file__).resolve().parents[2] / "scenes" / "face.xml"
+
+
+def write_ply(path, vertices, faces, colors):
+    """Binary PLY with float32 positions and float32 r, g, b (Mitsuba reads them as the
+    ``vertex_color`` attribute; vertex order is kept, unlike OBJ)."""
+    v = np.hstack([np.asarray(vertices, np.float32), np.asarray(colors, np.float32)])
+    f = np.asarray(faces, np.int32)
+    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\n"
+            + "".join(f"property float {c}\n" for c in ("x", "y", "z", "r", "g", "b"))
+            + f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n")
+    rec = np.zeros(len(f), dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    rec["n"], rec["i"] = 3, f
+    with open(path, "wb") as fh:
+        fh.write(head.encode())
+        fh.write(v.astype("<f4").tobytes())
+        fh.write(rec.tobytes())
 
 
 class FaceRenderer:
@@ -63,10 +84,6 @@ class FaceRenderer:
         self.params.keep(["face.vertex_positions", f"face.{ATTRIBUTE}"])
         self.sensor = self.scene.sensors()[0]
         self.integrator = self.scene.integrator()
-
-    @property
-    def Float(self):
-        return self.mi.Float
 
     def _as_float(self, a, n, name):
         if isinstance(a, np.ndarray) or isinstance(a, (list, tuple)):
@@ -140,6 +157,34 @@ class FaceRenderer:
         rows = np.repeat(np.arange(len(pixels)), k * k * 3)
         W = sp.csr_matrix((b.ravel(), (rows, tri.ravel())), shape=(len(pixels), self.vertex_count))
         return pixels, W
+
+    def export_scene(self, folder, x, gamma, albedo, rotation=None, translation=None):
+        """Write the current image model as a stand-alone Mitsuba scene: ``face.ply`` (posed
+        skin, float per-vertex radiance) and ``face.xml`` from ``scenes/face.xml``. Returns
+        the XML path; ``mi.load_file(path)`` renders the same image."""
+        from pathlib import Path
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        with self.dr.suspend_grad():
+            xr, rad = self.vertex_radiance(np.asarray(x, np.float32), np.asarray(gamma, np.float32),
+                                           np.asarray(albedo, np.float32), rotation, translation)
+        write_ply(folder / "face.ply", np.array(xr).reshape(-1, 3), np.asarray(self.faces).reshape(-1, 3),
+                  np.array(rad).reshape(-1, 3))
+        sensor = self.camera.sensor_dict()
+        values = {"mesh": "face.ply", "width": str(self.camera.width), "height": str(self.camera.height),
+                  "fov": repr(sensor["fov"]), "ppx": repr(sensor["principal_point_offset_x"]),
+                  "ppy": repr(sensor["principal_point_offset_y"]), "spp": str(self.spp),
+                  "to_world": " ".join(repr(float(v)) for v in
+                                       np.array(sensor["to_world"].matrix, np.float64).ravel())}
+        if not SCENE_TEMPLATE.is_file():
+            raise ConfigError(f"{SCENE_TEMPLATE}: scene template missing; export_scene needs the "
+                              "repository's scenes/ folder (install from the source tree)")
+        text = SCENE_TEMPLATE.read_text()
+        for k in sorted(values, key=len, reverse=True):
+            text = text.replace(f"${k}", values[k])
+        out = folder / "face.xml"
+        out.write_text(text)
+        return out
 
     def image(self, x, gamma, albedo, rotation=None, translation=None, seed=None, spp=None):
         """numpy (H, W, 4) float32 render (no gradients)."""

@@ -19,6 +19,7 @@ _Y = np.array([0.282095, 0.488603, 0.488603, 0.488603, 1.092548, 1.092548, 0.315
                1.092548, 0.546274])
 BAND_WEIGHTS = np.array([np.pi] + [2 * np.pi / 3] * 3 + [np.pi / 4] * 5)
 SH_COUNT = 9
+SKIN_ALBEDO = np.array([0.62, 0.45, 0.37])   # a mean skin albedo, linear RGB
 
 
 def sh_basis(normals):

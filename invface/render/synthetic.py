@@ -8,9 +8,7 @@ import numpy as np
 
 from .camera import Camera
 from .renderer import FaceRenderer
-from .shading import constant_light
-
-SKIN = np.array([0.62, 0.45, 0.37])     # linear RGB, the mean skin albedo of the demo head
+from .shading import SKIN_ALBEDO, constant_light
 
 
 def studio_light():
@@ -36,7 +34,7 @@ def skin_albedo(model, seed=0):
     centres = V[rng.choice(len(V), min(60, len(V)), replace=False)]
     mottle = sum(rng.normal(0, 1, 3) * np.exp(-np.sum((V - c) ** 2, 1) / (2 * 0.01 ** 2))[:, None]
                  for c in centres)
-    a = SKIN * (1 + 0.05 * mottle + blob("stomion", 0.012) * [0.2, -0.2, -0.1]
+    a = SKIN_ALBEDO * (1 + 0.05 * mottle + blob("stomion", 0.012) * [0.2, -0.2, -0.1]
                 - 0.3 * (blob("brow_L", 0.01) + blob("brow_R", 0.01))
                 + 0.1 * (blob("cheek_contour_L", 0.015) + blob("cheek_contour_R", 0.015)) * [1, 0.2, 0.2])
     return np.clip(a, 0.02, 1.0)
