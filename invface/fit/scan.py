@@ -1,0 +1,153 @@
+"""Fitting the face to a 3D scan: paper 000, Eq. 13.
+
+    min_{w, theta, t}  || F* - x_R(w) ||^2 + lambda || w ||^2,   x_R = R(theta) x(w) + t
+
+x(w) is either model (``FaceModel.surface_model(kind)``: the blendshape rig or the
+blendshape-driven muscle simulation); its Jacobian comes from the rig's analytic derivative
+or the simulation's tangent solves, and the solver is the box-constrained dogleg
+(``dogleg.py``), blendshape weights in [0, 1]. lambda = 1e-6 as in the paper.
+
+Two correspondence modes:
+
+- ``correspondence``: the scan shares the model's topology (vertex count and order), as in
+  the paper; residuals are the vertex differences.
+- ``nearest``: any topology; each model vertex is paired with its closest scan point and the
+  residual is the point-to-plane distance n . (x_R - y) along the scan normal. Pairs farther
+  than ``max_distance`` or on scan boundaries are dropped; pairs are refreshed between
+  dogleg rounds (ICP style) until they stop changing.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InvfaceError
+from ..model.rig import euler_xyz, euler_xyz_derivatives
+from .dogleg import dogleg
+
+LAMBDA = 1e-6          # paper 000, Eq. 13
+
+
+@dataclass
+class ScanFit:
+    """Result: parameters p = (b, jaw), rigid pose, surfaces, per-vertex error, the log."""
+
+    p: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    surface: np.ndarray            # x_R (V, 3) m, posed
+    error: np.ndarray              # (V,) m: distance to the scan (NaN where unpaired)
+    kind: str
+    history: list = field(default_factory=list)
+    status: str = ""
+
+
+def _bounds(model):
+    K = len(model.blendshape_names)
+    lo = np.r_[np.zeros(K), np.full(6, -np.inf), np.full(6, -np.inf)]
+    hi = np.r_[np.ones(K), np.full(6, np.inf), np.full(6, np.inf)]
+    return lo, hi
+
+
+class _Objective:
+    """z = (p (P,), theta (3,), t (3,)) -> residual and Jacobian of Eq. 13."""
+
+    def __init__(self, surface_model, lam, P):
+        self.sm, self.lam, self.P = surface_model, lam, P
+        self.pairs = None                  # (vertex ids, scan points, scan normals) in nearest mode
+
+    def posed(self, z):
+        p, th, t = z[:self.P], z[self.P:self.P + 3], z[self.P + 3:]
+        x = self.sm.surface(p)
+        return x, x @ euler_xyz(th).T + t
+
+    def __call__(self, z, target=None):
+        P = self.P
+        p, th = z[:P], z[P:P + 3]
+        x, xr = self.posed(z)
+        R = euler_xyz(th)
+        Jx = self.sm.surface_jacobian(p) @ R.T                        # (P, V, 3)
+        Jth = np.einsum("kij,vj->kvi", euler_xyz_derivatives(th), x)  # (3, V, 3)
+        Jt = np.broadcast_to(np.eye(3)[:, None, :], (3, len(x), 3))
+        Jall = np.concatenate([Jx, Jth, Jt])                          # (P+6, V, 3)
+        if self.pairs is None:
+            r = (xr - target).ravel()
+            J = Jall.reshape(len(Jall), -1).T
+        else:
+            vid, y, n = self.pairs
+            r = np.einsum("ij,ij->i", xr[vid] - y, n)
+            J = np.einsum("kij,ij->ik", Jall[:, vid], n)
+        reg = np.sqrt(self.lam) * p
+        Jreg = np.zeros((P, P + 6))
+        Jreg[:, :P] = np.sqrt(self.lam) * np.eye(P)
+        return np.r_[r, reg], np.vstack([J, Jreg])
+
+
+def _closest(scan_vertices, scan_faces, points):
+    """Closest points (N,3) on the scan and the scan face normals there (N,3)."""
+    from ..mesh.closest import closest_points
+    tri, bary, _ = closest_points(points, scan_vertices, scan_faces)
+    fv = scan_vertices[scan_faces[tri]]
+    q = np.einsum("nk,nkj->nj", bary, fv)
+    n = np.cross(fv[:, 1] - fv[:, 0], fv[:, 2] - fv[:, 0])
+    return q, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30), tri
+
+
+def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="correspondence",
+             lam=LAMBDA, p0=None, rotation=None, translation=None, max_iter=50,
+             max_distance=0.01, rounds=8, progress=None):
+    """Fit controls and rigid pose of ``model`` to a scan (metres). Returns a ScanFit.
+
+    scan_vertices (S,3); scan_faces (G,3) (needed in ``nearest`` mode); kind: "blendshape"
+    or "simulation"; p0 (K+6,) start (default neutral); rotation/translation: start pose."""
+    S = np.asarray(scan_vertices, float)
+    V = len(model.neutral)
+    if mode not in ("correspondence", "nearest"):
+        raise InvfaceError(f"unknown correspondence mode '{mode}': use 'correspondence' or 'nearest'")
+    if not np.all(np.isfinite(S)):
+        raise InvfaceError("scan has non-finite vertex positions")
+    if mode == "correspondence" and S.shape != (V, 3):
+        raise InvfaceError(f"scan has {len(S)} vertices but the model has {V}: correspondence mode "
+                           "needs the model's topology; use --mode nearest for other meshes")
+    if mode == "nearest" and scan_faces is None:
+        raise InvfaceError("nearest mode needs the scan's triangles")
+    sm = model.surface_model(kind)
+    P = len(model.blendshape_names) + 6
+    z = np.r_[np.zeros(P) if p0 is None else np.asarray(p0, float),
+              np.zeros(3) if rotation is None else rotation,
+              np.zeros(3) if translation is None else translation]
+    lo, hi = _bounds(model)
+    obj = _Objective(sm, lam, P)
+    history = []
+    if mode == "correspondence":
+        res = dogleg(lambda zz: obj(zz, S), z, lo, hi, max_iter=max_iter, progress=progress)
+        z, history, status = res.x, res.history, res.status
+    else:
+        F = np.asarray(scan_faces)
+        status, last = "rounds", None
+        for rnd in range(rounds):
+            _, xr = obj.posed(z)
+            q, n, tri = _closest(S, F, xr)
+            d = np.linalg.norm(xr - q, axis=1)
+            vid = np.flatnonzero(d < max_distance)
+            if len(vid) < 20:
+                raise InvfaceError(f"only {len(vid)} model vertices lie within {max_distance * 1000:.0f} mm "
+                                   "of the scan: align the scan to the model first (metres, +Y up, +Z front)")
+            obj.pairs = (vid, q[vid], n[vid])
+            res = dogleg(obj, z, lo, hi, max_iter=max_iter, progress=progress)
+            z = res.x
+            history += [dict(h, round=rnd) for h in res.history]
+            key = tri[vid]
+            if last is not None and len(key) == len(last) and np.mean(key != last) < 0.01:
+                status = "converged"
+                break
+            last = key
+    _, xr = obj.posed(z)
+    if mode == "correspondence":
+        err = np.linalg.norm(xr - S, axis=1)
+    else:
+        q, _, _ = _closest(S, np.asarray(scan_faces), xr)
+        err = np.linalg.norm(xr - q, axis=1)
+    return ScanFit(p=z[:P], rotation=z[P:P + 3], translation=z[P + 3:], surface=xr, error=err,
+                   kind=kind, history=history, status=status)

@@ -1,0 +1,71 @@
+"""Dogleg least squares and 3D scan fitting (paper 000, Eq. 13)."""
+import numpy as np
+import pytest
+
+from invface.errors import InvfaceError
+from invface.fit.dogleg import dogleg
+from invface.fit.scan import fit_scan
+from invface.model.rig import euler_xyz
+
+ROT, TR = np.array([0.05, -0.1, 0.02]), np.array([0.003, -0.002, 0.005])
+
+
+def _rosenbrock(z):
+    x, y = z
+    return np.array([10 * (y - x * x), 1 - x]), np.array([[-20 * x, 10.0], [-1.0, 0.0]])
+
+
+def test_dogleg_minimises_rosenbrock_with_and_without_bounds():
+    res = dogleg(_rosenbrock, [-1.2, 1.0], max_iter=100)
+    np.testing.assert_allclose(res.x, [1, 1], atol=1e-6)
+    assert res.status in ("cost", "gradient", "step") and res.history[-1]["accepted"] in (True, False)
+    res = dogleg(_rosenbrock, [-1.2, 1.0], lower=[-2, -2], upper=[0.5, 2], max_iter=100)
+    np.testing.assert_allclose(res.x, [0.5, 0.25], atol=1e-5)       # the constrained optimum
+
+
+def _truth(model, kind, seed=0):
+    K = len(model.blendshape_names)
+    rng = np.random.default_rng(seed)
+    p = np.r_[np.where(rng.random(K) < 0.3, rng.uniform(0.2, 0.8, K), 0), [0.08, 0, 0, 0, 0, 0]]
+    x = model.surface_model(kind).surface(p)
+    return p, x @ euler_xyz(ROT).T + TR
+
+
+@pytest.mark.parametrize("kind", ["blendshape", "simulation"])
+def test_scan_fit_recovers_controls_and_pose(small_expressive_model, kind):
+    m = small_expressive_model
+    p, scan = _truth(m, kind)
+    fit = fit_scan(m, scan, kind=kind, lam=1e-8)
+    assert np.abs(fit.p - p).max() < 1e-3
+    assert np.abs(fit.rotation - ROT).max() < 1e-4 and np.abs(fit.translation - TR).max() < 1e-5
+    assert np.median(fit.error) < 1e-5
+
+
+def test_paper_lambda_biases_weights_by_about_1e_3(small_expressive_model):
+    m = small_expressive_model
+    p, scan = _truth(m, "blendshape")
+    fit = fit_scan(m, scan, kind="blendshape")           # lambda = 1e-6 on m^2 residuals
+    assert 1e-4 < np.abs(fit.p - p).max() < 3e-3
+
+
+def test_nearest_point_mode_fits_a_scan_in_another_topology(small_expressive_model):
+    import trimesh
+    m = small_expressive_model
+    p, scan = _truth(m, "blendshape", seed=1)
+    V, F = trimesh.remesh.subdivide(scan, m.triangles)            # other vertex count and order
+    order = np.random.default_rng(0).permutation(len(V))
+    inv = np.argsort(order)
+    fit = fit_scan(m, V[order], inv[F], kind="blendshape", mode="nearest", lam=1e-8)
+    assert np.median(fit.error) < 5e-5 and np.abs(fit.p - p).max() < 0.05
+
+
+def test_scan_fit_rejects_bad_scans(small_expressive_model):
+    m = small_expressive_model
+    with pytest.raises(InvfaceError, match="correspondence mode needs the model's topology"):
+        fit_scan(m, m.neutral[:-5])
+    bad = m.neutral.copy()
+    bad[3, 0] = np.nan
+    with pytest.raises(InvfaceError, match="non-finite"):
+        fit_scan(m, bad)
+    with pytest.raises(InvfaceError, match="align the scan"):
+        fit_scan(m, m.neutral + [0.5, 0, 0], m.triangles, mode="nearest")
