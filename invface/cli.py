@@ -213,6 +213,61 @@ def cmd_camera_calibrate(args):
     return 0
 
 
+def _read_scan(path):
+    """(vertices (S,3), faces (G,3)) of an OBJ/PLY scan, in metres."""
+    import numpy as np
+    import trimesh
+    path = Path(path)
+    if not path.is_file():
+        raise InvfaceError(f"{path}: scan file not found")
+    try:
+        mesh = trimesh.load(path, process=False, force="mesh")
+    except Exception as e:  # noqa: BLE001 - trimesh raises many kinds
+        raise InvfaceError(f"{path}: not a readable mesh ({e})") from None
+    if len(getattr(mesh, "vertices", [])) == 0 or len(getattr(mesh, "faces", [])) == 0:
+        raise InvfaceError(f"{path}: the file holds no triangle mesh")
+    return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+
+
+def cmd_fit_scan(args):
+    """Fit controls and pose to a 3D scan (Eq. 13); write fit.json and the fitted mesh."""
+    import numpy as np
+    import trimesh
+    from tqdm import tqdm
+
+    from .fit.scan import fit_scan
+    model = _load_model(args.model, args.resolution)
+    V, F = _read_scan(args.scan)
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    bar = tqdm(desc=f"fit {args.model_kind} model to scan", unit="it", leave=False)
+    t0 = time.perf_counter()
+    try:
+        fit = fit_scan(model, V, F, kind=args.model_kind, mode=args.mode, lam=args.lam,
+                       max_iter=args.max_iter, progress=lambda h: (bar.update(1), bar.set_postfix(
+                           cost=f"{h['cost']:.3g}")))
+    finally:
+        bar.close()
+    summary = fit.summary(model)
+    summary.update(scan=str(args.scan), mode=args.mode, lam=args.lam,
+                   seconds=time.perf_counter() - t0, history=fit.history)
+    tmp = out / "fit.json.tmp"
+    tmp.write_text(json.dumps(summary, indent=1))
+    tmp.replace(out / "fit.json")
+    trimesh.Trimesh(fit.surface, model.triangles, process=False).export(out / "fitted.ply")
+    e = summary["error_mm"]
+    print(f"{args.model_kind} fit: {summary['iterations']} iterations ({fit.status}), "
+          f"{summary['seconds']:.1f} s; error median {e['median']:.3f} mm, max {e['max']:.3f} mm; "
+          f"{summary['nonzero_weights']} non-zero weights")
+    top = sorted(summary["weights"].items(), key=lambda kv: -kv[1])[:5]
+    print("largest weights: " + ", ".join(f"{k} {v:.3f}" for k, v in top))
+    if fit.activations:
+        top = sorted(fit.activations.items(), key=lambda kv: -kv[1])[:5]
+        print("strongest muscles: " + ", ".join(f"{k} {v:.3f}" for k, v in top))
+    print(f"wrote {out / 'fit.json'} and {out / 'fitted.ply'}")
+    return 0
+
+
 def cmd_demo(args):
     """Until fitting lands: build the template, pose the jaw, write previews."""
     from . import template
@@ -299,6 +354,17 @@ def build_parser():
     c.add_argument("--max-iter", type=int, default=30, help="Gauss-Newton iterations at most")
     c.add_argument("-o", "--output", default="calib.npz", help="calibration file to write (.npz)")
     c.set_defaults(func=cmd_calibrate)
+    fs = sub.add_parser("fit-scan", help="fit controls and rigid pose to a 3D scan (Eq. 13)")
+    fs.add_argument("scan", help="scan mesh (OBJ/PLY, metres, model frame: +Y up, face along +Z)")
+    fs.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
+    fs.add_argument("--resolution", type=float, default=1.0, help="template size factor when no --model")
+    fs.add_argument("--model-kind", choices=["blendshape", "simulation"], default="blendshape")
+    fs.add_argument("--mode", choices=["correspondence", "nearest"], default="correspondence",
+                    help="correspondence: same topology as the model; nearest: any mesh, point-to-plane")
+    fs.add_argument("--lam", type=float, default=1e-6, help="weight regulariser lambda (paper: 1e-6)")
+    fs.add_argument("--max-iter", type=int, default=50, help="dogleg iterations at most (per round)")
+    fs.add_argument("-o", "--output", default="reports/fit-scan", help="output folder")
+    fs.set_defaults(func=cmd_fit_scan)
     cam = sub.add_parser("camera", help="camera tools")
     camsub = cam.add_subparsers(dest="camera_command", required=True)
     cc = camsub.add_parser("calibrate", help="intrinsics and distortion from checkerboard images (OpenCV)")

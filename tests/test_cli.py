@@ -65,3 +65,20 @@ def test_camera_calibrate_needs_the_board(tmp_path):
     r = run("camera", "calibrate", *[str(tmp_path / f"b{i}.png") for i in range(3)], "--board", "7x5",
             "-o", str(tmp_path / "cam.json"))
     assert r.returncode == 2 and "found in 0 of 3 images" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_fit_scan_command(small_expressive_model, tmp_path):
+    import json
+    import trimesh
+    m = small_expressive_model
+    x = m.surface({"lipCornerPull_L": 0.6, "jaw": [0.05, 0, 0, 0, 0, 0]})
+    trimesh.Trimesh(x, m.triangles, process=False).export(tmp_path / "scan.ply")
+    r = run("fit-scan", str(tmp_path / "scan.ply"), "--resolution", str(SMALL_RESOLUTION),
+            "--lam", "1e-8", "-o", str(tmp_path / "out"))
+    assert r.returncode == 0, r.stderr
+    fit = json.loads((tmp_path / "out" / "fit.json").read_text())
+    assert abs(fit["weights"]["lipCornerPull_L"] - 0.6) < 1e-3 and fit["error_mm"]["max"] < 0.01
+    assert (tmp_path / "out" / "fitted.ply").exists()
+    trimesh.Trimesh(x[:-10], m.triangles[:100], process=False).export(tmp_path / "other.ply")
+    r = run("fit-scan", str(tmp_path / "other.ply"), "--resolution", str(SMALL_RESOLUTION))
+    assert r.returncode == 2 and "--mode nearest" in r.stderr and "Traceback" not in r.stderr

@@ -41,6 +41,20 @@ class ScanFit:
     kind: str
     history: list = field(default_factory=list)
     status: str = ""
+    activations: dict = field(default_factory=dict)   # muscle -> activation (simulation fits)
+
+    def summary(self, model):
+        """JSON-ready dict: weights by name, jaw, pose, activations, error statistics in mm."""
+        K = len(model.blendshape_names)
+        e = self.error[np.isfinite(self.error)] * 1000
+        return {"kind": self.kind, "status": self.status, "iterations": len(self.history),
+                "weights": dict(zip(model.blendshape_names, np.round(self.p[:K], 6).tolist())),
+                "jaw": self.p[K:].tolist(), "rotation": self.rotation.tolist(),
+                "translation": self.translation.tolist(),
+                "nonzero_weights": int(np.sum(self.p[:K] > 1e-3)),
+                "activations": {k: round(v, 6) for k, v in self.activations.items()},
+                "error_mm": {"median": float(np.median(e)), "mean": float(e.mean()),
+                             "max": float(e.max())}}
 
 
 def _bounds(model):
@@ -149,5 +163,9 @@ def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="cor
     else:
         q, _, _ = _closest(S, np.asarray(scan_faces), xr)
         err = np.linalg.norm(xr - q, axis=1)
+    acts = {}
+    if kind == "simulation":
+        a = sm.result_at(z[:P]).tracks.activations
+        acts = {m.name: float(v) for m, v in zip(model.muscles, a)}
     return ScanFit(p=z[:P], rotation=z[P:P + 3], translation=z[P + 3:], surface=xr, error=err,
-                   kind=kind, history=history, status=status)
+                   kind=kind, history=history, status=status, activations=acts)
