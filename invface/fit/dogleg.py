@@ -77,9 +77,8 @@ def dogleg(fun, x0, lower=None, upper=None, max_iter=50, radius=1.0, ftol=1e-10,
             status = "gradient"
             break
         Jf = J[:, free]
-        H = Jf.T @ Jf
         p = np.zeros(n)
-        p[free] = _dogleg_step(g[free], H, radius)
+        p[free] = _dogleg_step(g[free], Jf.T @ Jf, radius)
         p = np.clip(x + p, lo, hi) - x                 # projected onto the box
         Jp = J @ p
         predicted = -(g @ p + 0.5 * Jp @ Jp)

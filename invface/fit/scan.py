@@ -57,11 +57,42 @@ class ScanFit:
                              "max": float(e.max())}}
 
 
-def _bounds(model):
+def posed_surface(surface_model, z, P):
+    """Unposed x (V,3) and posed x_R = R(theta) x + t (V,3) for z = (p (P,), theta, t)."""
+    x = surface_model.surface(z[:P])
+    return x, x @ euler_xyz(z[P:P + 3]).T + z[P + 3:]
+
+
+def posed_jacobian(surface_model, z, P):
+    """x_R (V,3) and d x_R / dz (P+6, V, 3) for z = (p, theta (3,), t (3,))."""
+    p, th = z[:P], z[P:P + 3]
+    x, xr = posed_surface(surface_model, z, P)
+    Jx = surface_model.surface_jacobian(p) @ euler_xyz(th).T            # (P, V, 3)
+    Jth = np.einsum("kij,vj->kvi", euler_xyz_derivatives(th), x)        # (3, V, 3)
+    Jt = np.broadcast_to(np.eye(3)[:, None, :], (3, len(x), 3))
+    return xr, np.concatenate([Jx, Jth, Jt])
+
+
+JAW_LOWER = np.array([-0.1, -0.15, -0.15, -0.008, -0.008, -0.008])   # rad, rad, rad, m, m, m
+JAW_UPPER = np.array([0.6, 0.15, 0.15, 0.008, 0.008, 0.008])
+
+
+def control_bounds(model):
+    """Box (lower, upper) on z = (b, jaw, theta, t): blendshape weights in [0, 1]; the jaw
+    within its anatomical range (opening -0.1..0.6 rad about the hinge, +-0.15 rad sideways
+    and twist, +-8 mm translation); the rigid pose free."""
     K = len(model.blendshape_names)
-    lo = np.r_[np.zeros(K), np.full(6, -np.inf), np.full(6, -np.inf)]
-    hi = np.r_[np.ones(K), np.full(6, np.inf), np.full(6, np.inf)]
+    lo = np.r_[np.zeros(K), JAW_LOWER, np.full(6, -np.inf)]
+    hi = np.r_[np.ones(K), JAW_UPPER, np.full(6, np.inf)]
     return lo, hi
+
+
+def regulariser(z, P, lam, center=None):
+    """Rows sqrt(lam) (p - center) and their Jacobian (P, P+6): the lambda |w|^2 terms."""
+    c = 0 if center is None else center
+    J = np.zeros((P, P + 6))
+    J[:, :P] = np.sqrt(lam) * np.eye(P)
+    return np.sqrt(lam) * (z[:P] - c), J
 
 
 class _Objective:
@@ -72,19 +103,10 @@ class _Objective:
         self.pairs = None                  # (vertex ids, scan points, scan normals) in nearest mode
 
     def posed(self, z):
-        p, th, t = z[:self.P], z[self.P:self.P + 3], z[self.P + 3:]
-        x = self.sm.surface(p)
-        return x, x @ euler_xyz(th).T + t
+        return posed_surface(self.sm, z, self.P)
 
     def __call__(self, z, target=None):
-        P = self.P
-        p, th = z[:P], z[P:P + 3]
-        x, xr = self.posed(z)
-        R = euler_xyz(th)
-        Jx = self.sm.surface_jacobian(p) @ R.T                        # (P, V, 3)
-        Jth = np.einsum("kij,vj->kvi", euler_xyz_derivatives(th), x)  # (3, V, 3)
-        Jt = np.broadcast_to(np.eye(3)[:, None, :], (3, len(x), 3))
-        Jall = np.concatenate([Jx, Jth, Jt])                          # (P+6, V, 3)
+        xr, Jall = posed_jacobian(self.sm, z, self.P)
         if self.pairs is None:
             r = (xr - target).ravel()
             J = Jall.reshape(len(Jall), -1).T
@@ -92,9 +114,7 @@ class _Objective:
             vid, y, n = self.pairs
             r = np.einsum("ij,ij->i", xr[vid] - y, n)
             J = np.einsum("kij,ij->ik", Jall[:, vid], n)
-        reg = np.sqrt(self.lam) * p
-        Jreg = np.zeros((P, P + 6))
-        Jreg[:, :P] = np.sqrt(self.lam) * np.eye(P)
+        reg, Jreg = regulariser(z, self.P, self.lam)
         return np.r_[r, reg], np.vstack([J, Jreg])
 
 
@@ -131,7 +151,7 @@ def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="cor
     z = np.r_[np.zeros(P) if p0 is None else np.asarray(p0, float),
               np.zeros(3) if rotation is None else rotation,
               np.zeros(3) if translation is None else translation]
-    lo, hi = _bounds(model)
+    lo, hi = control_bounds(model)
     obj = _Objective(sm, lam, P)
     history = []
     if mode == "correspondence":

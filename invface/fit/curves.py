@@ -1,0 +1,210 @@
+"""Curve fitting to a plate: paper 000, Eq. 15.
+
+    min_{w^, theta, t}  || E_1(w^) ||^2 + lambda_1 || w^ ||^2,      lambda_1 = 3600
+
+E_1 stacks, for every vertex of the model's named 3D curves (``model.curves``: eyelids and
+lips by default), the 2D Euclidean distance in pixels between its projection into the plate
+and the plate's curve of the same name (a polyline drawn by a roto artist, or found by a
+landmark detector). Each residual is the signed distance along the direction in which it
+grows (the segment normal at the foot point), so its Jacobian is exact where the foot point
+is interior; with the full 2D difference vector and a fixed foot point, Gauss-Newton stalled
+(the tangential part predicts decreases that sliding along the curve never gives). The rigid pose is
+solved with the controls; its start comes from OpenCV's solvePnP on the curves resampled
+by arc length.
+
+Plate curve file (JSON, pixels, OpenCV convention: (0, 0) is the centre of the top-left
+pixel)::
+
+    {"image_size": [720, 540],                       # optional; checked against the plate
+     "curves": {"lip_outer_upper": [[u, v], ...], "eye_L_upper": [[u, v], ...], ...}}
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InvfaceError
+from ..jsonfile import read_object
+from .dogleg import dogleg
+from .scan import control_bounds, posed_jacobian, posed_surface, regulariser
+
+LAMBDA_1 = 3600.0          # paper 000, Eq. 15 (pixel residuals)
+PLATE_CURVES = ("lip_outer_upper", "lip_outer_lower", "lip_inner_upper", "lip_inner_lower",
+                "eye_L_upper", "eye_L_lower", "eye_R_upper", "eye_R_lower")
+
+
+def read_curves(path, model, image_size=None):
+    """{name: (n, 2) float px} from a plate curve file; names must be model curves."""
+    data = read_object(path, what="curve file")
+    curves = data.get("curves")
+    if not isinstance(curves, dict) or not curves:
+        raise InvfaceError(f"{path}: expected {{\"curves\": {{name: [[u, v], ...]}}}}")
+    unknown = sorted(set(curves) - set(model.curves))
+    if unknown:
+        raise InvfaceError(f"{path}: unknown curve name(s) {unknown}; the model's curves are "
+                           f"{sorted(model.curves)}")
+    if image_size is not None and "image_size" in data and list(data["image_size"]) != list(image_size):
+        raise InvfaceError(f"{path}: curves were drawn on a {data['image_size']} image, the plate is "
+                           f"{list(image_size)}")
+    out = {}
+    for name, pts in curves.items():
+        try:
+            a = np.asarray(pts, float)
+        except (TypeError, ValueError):
+            raise InvfaceError(f"{path}: curve '{name}' is not a list of [u, v] points") from None
+        if a.ndim != 2 or a.shape[1] != 2 or len(a) < 2 or not np.all(np.isfinite(a)):
+            raise InvfaceError(f"{path}: curve '{name}' needs at least 2 finite [u, v] points")
+        out[name] = a
+    return out
+
+
+def write_curves(path, curves, image_size=None):
+    """Write a plate curve file ({name: (n, 2) px})."""
+    import json
+    from pathlib import Path
+    data = {"curves": {k: np.round(np.asarray(v, float), 3).tolist() for k, v in curves.items()}}
+    if image_size is not None:
+        data["image_size"] = [int(s) for s in image_size]
+    Path(path).write_text(json.dumps(data))
+
+
+def closest_on_polyline(points, poly, normals=False):
+    """Closest points (n, 2) on the polyline ``poly`` (m, 2) to ``points`` (n, 2); with
+    ``normals`` also the unit direction (n, 2) along which the distance grows: the segment's
+    normal at an interior foot point, the direction from a vertex of the polyline otherwise."""
+    a, b = poly[:-1], poly[1:]
+    d = b - a
+    t = np.einsum("nsk,sk->ns", points[:, None, :] - a[None], d) / np.maximum((d * d).sum(1), 1e-30)
+    tc = np.clip(t, 0, 1)
+    q = a[None] + tc[..., None] * d[None]                                     # (n, s, 2)
+    k = np.argmin(((q - points[:, None, :]) ** 2).sum(-1), 1)
+    i = np.arange(len(points))
+    foot = q[i, k]
+    if not normals:
+        return foot
+    seg = d[k] / np.maximum(np.linalg.norm(d[k], axis=1, keepdims=True), 1e-30)
+    nrm = np.stack([-seg[:, 1], seg[:, 0]], 1)
+    off = points - foot
+    nrm *= np.where((off * nrm).sum(1) < 0, -1.0, 1.0)[:, None]
+    dist = np.linalg.norm(off, axis=1, keepdims=True)
+    at_vertex = (tc[i, k] <= 0) | (tc[i, k] >= 1)
+    nrm = np.where(at_vertex[:, None] & (dist > 1e-12), off / np.maximum(dist, 1e-30), nrm)
+    return foot, nrm
+
+
+def resample(poly, n):
+    """n points equally spaced by arc length along a polyline (m, d)."""
+    seg = np.linalg.norm(np.diff(poly, axis=0), axis=1)
+    s = np.r_[0, np.cumsum(seg)]
+    u = np.linspace(0, s[-1], n)
+    return np.stack([np.interp(u, s, poly[:, k]) for k in range(poly.shape[1])], 1)
+
+
+def projection_jacobian(camera, xr):
+    """Pixels (n, 2) of world points xr (n, 3) and d pixel / d x (n, 2, 3)."""
+    pc = xr @ camera.R.T + camera.t
+    X, Y, Z = pc.T
+    fx, fy = camera.K[0, 0], camera.K[1, 1]
+    uv = np.stack([fx * X / Z + camera.K[0, 2] + camera.K[0, 1] * Y / Z, fy * Y / Z + camera.K[1, 2]], 1)
+    dcam = np.zeros((len(xr), 2, 3))
+    dcam[:, 0, 0], dcam[:, 0, 2] = fx / Z, -fx * X / Z ** 2
+    dcam[:, 1, 1], dcam[:, 1, 2] = fy / Z, -fy * Y / Z ** 2
+    return uv, dcam @ camera.R
+
+
+@dataclass
+class CurveFit:
+    """Eq. 15 result: controls p, pose, pixel residuals per curve, the dogleg log."""
+
+    p: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    residual_px: dict
+    history: list = field(default_factory=list)
+    status: str = ""
+
+    @property
+    def rms_px(self):
+        r = np.concatenate(list(self.residual_px.values()))
+        return float(np.sqrt(np.mean(r ** 2)))
+
+
+class CurveObjective:
+    """z -> (E_1 (n,) px with the lambda_1 rows, Jacobian) for named plate curves."""
+
+    def __init__(self, model, surface_model, camera, curves, lam):
+        self.model, self.sm, self.camera, self.lam = model, surface_model, camera, lam
+        self.P = len(model.blendshape_names) + 6
+        self.curves = {k: v for k, v in curves.items() if k in model.curves}
+        self.vertices = {k: np.asarray(model.curves[k]) for k in self.curves}
+
+    def residuals(self, xr):
+        """{name: (n, 2) projected-minus-closest px} at posed vertices xr (V, 3)."""
+        out = {}
+        for name, poly in self.curves.items():
+            uv, _ = projection_jacobian(self.camera, xr[self.vertices[name]])
+            out[name] = uv - closest_on_polyline(uv, poly)
+        return out
+
+    def __call__(self, z):
+        xr, Jall = posed_jacobian(self.sm, z, self.P)
+        rows, jac = [], []
+        for name, poly in self.curves.items():
+            vid = self.vertices[name]
+            uv, duv = projection_jacobian(self.camera, xr[vid])
+            foot, nrm = closest_on_polyline(uv, poly, normals=True)
+            rows.append(np.einsum("ni,ni->n", uv - foot, nrm))
+            jac.append(np.einsum("ni,nij,knj->nk", nrm, duv, Jall[:, vid]))
+        reg, Jreg = regulariser(z, self.P, self.lam)
+        return np.concatenate(rows + [reg]), np.vstack(jac + [Jreg])
+
+
+def initial_pose(model, camera, curves, rotation=None, translation=None, samples=20):
+    """Rigid pose (theta (3,), t (3,)) from the neutral curves and the plate curves by
+    solvePnP on arc-length resampled point pairs; the given pose is the PnP start."""
+    import cv2
+    from scipy.spatial.transform import Rotation
+    obj, img = [], []
+    for name, poly in curves.items():
+        obj.append(resample(model.neutral[model.curves[name]], samples))
+        img.append(resample(poly, samples))
+    obj, img = np.concatenate(obj), np.concatenate(img)
+    th = np.zeros(3) if rotation is None else np.asarray(rotation, float)
+    t = np.zeros(3) if translation is None else np.asarray(translation, float)
+    # camera-frame pose of the model: R_c R(theta), R_c t + t_c
+    from ..model.rig import euler_xyz
+    R0 = camera.R @ euler_xyz(th)
+    rvec, tvec = cv2.Rodrigues(R0)[0], (camera.R @ t + camera.t).reshape(3, 1)
+    ok, rvec, tvec = cv2.solvePnP(obj, img, camera.K, None, rvec, tvec, useExtrinsicGuess=True,
+                                  flags=cv2.SOLVEPNP_ITERATIVE)
+    if not ok:
+        return th, t
+    Rm = camera.R.T @ cv2.Rodrigues(rvec)[0]
+    # euler_xyz is R = Rz Ry Rx: scipy's extrinsic "xyz" convention
+    th = Rotation.from_matrix(Rm).as_euler("xyz")
+    return th, camera.R.T @ (tvec.ravel() - camera.t)
+
+
+def fit_curves(model, camera, curves, kind="blendshape", lam=LAMBDA_1, p0=None, rotation=None,
+               translation=None, solve_pose=True, max_iter=50, progress=None):
+    """Solve Eq. 15: controls (and the rigid pose) from plate curves. Returns a CurveFit."""
+    if not curves:
+        raise InvfaceError("no plate curves to fit")
+    sm = model.surface_model(kind)
+    P = len(model.blendshape_names) + 6
+    if solve_pose:
+        rotation, translation = initial_pose(model, camera, curves, rotation, translation)
+    z = np.r_[np.zeros(P) if p0 is None else np.asarray(p0, float),
+              np.zeros(3) if rotation is None else rotation,
+              np.zeros(3) if translation is None else translation]
+    obj = CurveObjective(model, sm, camera, curves, lam)
+    lo, hi = control_bounds(model)
+    if not solve_pose:
+        lo, hi = lo.copy(), hi.copy()
+        lo[P:], hi[P:] = z[P:], z[P:]
+    res = dogleg(obj, z, lo, hi, max_iter=max_iter, progress=progress)
+    _, xr = posed_surface(sm, res.x, P)
+    resid = {k: np.linalg.norm(v, axis=1) for k, v in obj.residuals(xr).items()}
+    return CurveFit(p=res.x[:P], rotation=res.x[P:P + 3], translation=res.x[P + 3:],
+                    residual_px=resid, history=res.history, status=res.status)

@@ -1,0 +1,78 @@
+"""Plate curves and the curve fit of Eq. 15."""
+import json
+
+import numpy as np
+import pytest
+
+from invface.errors import InvfaceError
+from invface.fit.curves import (PLATE_CURVES, closest_on_polyline, fit_curves, projection_jacobian,
+                                read_curves, resample, write_curves)
+from invface.model.rig import euler_xyz
+from invface.render.camera import Camera
+
+ROT, TR = np.array([0.04, -0.12, 0.02]), np.array([0.005, -0.004, 0.01])
+
+
+def test_closest_point_on_polyline():
+    poly = np.array([[0.0, 0], [10, 0], [10, 10]])
+    q = closest_on_polyline(np.array([[5.0, 3], [12, 5], [-2, -1], [11, 12]]), poly)
+    np.testing.assert_allclose(q, [[5, 0], [10, 5], [0, 0], [10, 10]])
+    r = resample(poly, 5)
+    np.testing.assert_allclose(r, [[0, 0], [5, 0], [10, 0], [10, 5], [10, 10]])
+
+
+def test_projection_jacobian_matches_camera_and_finite_differences():
+    cam = Camera.front_view(720, 540)
+    cam.K[0, 2] += 13.0
+    x = np.random.default_rng(0).normal(0, 0.05, (6, 3))
+    uv, J = projection_jacobian(cam, x)
+    np.testing.assert_allclose(uv, cam.project(x)[0], atol=1e-9)
+    h = 1e-7
+    for k in range(3):
+        d = np.zeros(3)
+        d[k] = h
+        fd = (projection_jacobian(cam, x + d)[0] - projection_jacobian(cam, x - d)[0]) / (2 * h)
+        np.testing.assert_allclose(J[:, :, k], fd, rtol=1e-5, atol=1e-3)
+
+
+def _plate_curves(model, cam, names, p, noise=0.3):
+    x = model.surface_model("blendshape").surface(p) @ euler_xyz(ROT).T + TR
+    rng = np.random.default_rng(0)
+    return {n: resample(projection_jacobian(cam, x[model.curves[n]])[0], 40) + rng.normal(0, noise, (40, 2))
+            for n in names}
+
+
+def test_curve_fit_matches_the_plate_curves(small_expressive_model):
+    m = small_expressive_model
+    cam = Camera.front_view(720, 540)
+    p = m.parameters({"lipCornerPull_L": 0.6, "lipCornerPull_R": 0.5, "jaw": [0.1, 0, 0, 0, 0, 0]})
+    curves = _plate_curves(m, cam, PLATE_CURVES, p)
+    start = fit_curves(m, cam, curves, rotation=ROT, translation=TR, solve_pose=False, max_iter=0)
+    fit = fit_curves(m, cam, curves, rotation=ROT, translation=TR, solve_pose=False)
+    # lambda_1 = 3600 keeps the weights small, so the fit stays above the 0.3 px noise
+    assert start.rms_px > 5 and fit.rms_px < 1.5
+    assert np.all(fit.p[:len(m.blendshape_names)] >= 0) and np.all(fit.p[:len(m.blendshape_names)] <= 1)
+
+
+def test_pose_from_curves(small_expressive_model):
+    m = small_expressive_model
+    cam = Camera.front_view(720, 540)
+    names = PLATE_CURVES + ("brow_L", "brow_R", "nose_base", "nose_bridge")
+    curves = _plate_curves(m, cam, names, m.parameters({}))
+    fit = fit_curves(m, cam, curves)
+    assert np.abs(fit.rotation - ROT).max() < 0.03 and np.abs(fit.translation - TR).max() < 0.003
+    assert fit.rms_px < 1.0
+
+
+def test_curve_file_errors(small_expressive_model, tmp_path):
+    m = small_expressive_model
+    write_curves(tmp_path / "ok.json", {"eye_L_upper": [[1, 2], [3, 4]]}, image_size=(720, 540))
+    assert set(read_curves(tmp_path / "ok.json", m, image_size=(720, 540))) == {"eye_L_upper"}
+    with pytest.raises(InvfaceError, match="drawn on a \\[720, 540\\] image"):
+        read_curves(tmp_path / "ok.json", m, image_size=(360, 270))
+    (tmp_path / "bad.json").write_text(json.dumps({"curves": {"lip_smile": [[1, 2], [3, 4]]}}))
+    with pytest.raises(InvfaceError, match="bad.json: unknown curve name\\(s\\) \\['lip_smile'\\]"):
+        read_curves(tmp_path / "bad.json", m)
+    (tmp_path / "short.json").write_text(json.dumps({"curves": {"brow_L": [[1, 2]]}}))
+    with pytest.raises(InvfaceError, match="'brow_L' needs at least 2"):
+        read_curves(tmp_path / "short.json", m)
