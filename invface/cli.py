@@ -231,7 +231,6 @@ def _read_scan(path):
 
 def cmd_fit_scan(args):
     """Fit controls and pose to a 3D scan (Eq. 13); write fit.json and the fitted mesh."""
-    import numpy as np
     import trimesh
     from tqdm import tqdm
 
