@@ -261,3 +261,21 @@ def test_exported_scene_renders_the_same_image_in_stock_mitsuba(small_model, tmp
     assert np.abs(theirs[..., 3] - ours[..., 3]).mean() < 0.01
     inside = (ours[..., 3] > 0.999) & (theirs[..., 3] > 0.999)
     assert np.abs(theirs[inside, :3] - ours[inside, :3]).mean() < 0.01 * ours[inside, :3].mean()
+
+
+def test_backplate_shows_the_plate_behind_the_face(small_model):
+    cam = Camera.front_view(80, 60)
+    v, u = np.mgrid[0:60, 0:80].astype(np.float32)
+    ramp = np.stack([u / 80, v / 60, 0.3 + 0 * u], -1)            # linear: interpolation is exact
+    r = FaceRenderer(small_model.triangles, cam, spp=16, backplate=ramp)
+    albedo = np.full((len(small_model.neutral), 3), 0.6)
+    img = r.image(small_model.neutral + [0, 0, -5.0], _light(), albedo)   # face out of view
+    # samples spread over each pixel see the ramp averaged over the pixel: its centre value
+    np.testing.assert_allclose(img[1:-1, 1:-1, :3], ramp[1:-1, 1:-1], atol=2e-3)
+    assert np.all(img[..., 3] == 1)                                # the border pixels are covered
+    with_face = r.image(small_model.neutral, _light(), albedo)
+    plain = FaceRenderer(small_model.triangles, cam, spp=16).image(small_model.neutral, _light(), albedo)
+    face = plain[..., 3] > 0.999
+    np.testing.assert_allclose(with_face[face, :3], plain[face, :3], atol=1e-5)
+    with pytest.raises(ConfigError, match="backplate is 10x10 px"):
+        FaceRenderer(small_model.triangles, cam, backplate=np.zeros((10, 10, 3)))
