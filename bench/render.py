@@ -16,6 +16,7 @@ seeds of |g_seed - g_mean| / |g_mean| (Euclidean norms over all entries).
 from __future__ import annotations
 
 import argparse
+import tempfile
 import time
 
 import numpy as np
@@ -23,7 +24,7 @@ import numpy as np
 import invface
 from invface.render import shading
 from invface.render.camera import Camera
-from invface.render.renderer import FaceRenderer
+from invface.render.renderer import FaceRenderer, write_ply
 
 
 def scene_inputs(model):
@@ -98,17 +99,16 @@ def measure_prb(model, size, spp, sppp, repeats=3):
     cam = Camera.front_view(w, h)
     gamma, albedo = scene_inputs(model)
     V, F = model.neutral.astype(np.float32), model.triangles.astype(np.uint32)
+    ply = tempfile.mkstemp(suffix=".ply")[1]       # the attribute has to come from the file
+    write_ply(ply, V, F, shading.vertex_radiance(V, F, gamma, albedo))
     scene = mi.load_dict({"type": "scene", "sensor": cam.sensor_dict(spp=spp),
                           "integrator": {"type": "prb_projective", "max_depth": 1, "sppc": spp,
                                          "sppp": sppp, "sppi": 0},
-                          "face": {"type": "ply", "filename": _ply(V, F),
+                          "face": {"type": "ply", "filename": ply,
                                    "emitter": {"type": "area", "radiance": {
                                        "type": "mesh_attribute", "name": "vertex_color"}},
                                    "bsdf": {"type": "diffuse", "reflectance": 0.0}}})
     params = mi.traverse(scene)
-    params["face.vertex_color"] = mi.Float(shading.vertex_radiance(
-        V, F, gamma, albedo).astype(np.float32).ravel())
-    params.update()
     fwd, both = [], []
     for i in range(repeats + 1):
         x = mi.Float(params["face.vertex_positions"])
@@ -156,17 +156,6 @@ def silhouette_usefulness(model, size=(360, 270), spp=1):
         dr.eval(r.render(x, gamma, albedo))
         out.append(counts[-1])
     return out
-
-
-def _ply(V, F):
-    """The reference design loads its mesh from PLY (the face attribute comes from the file)."""
-    import tempfile
-    import trimesh
-    path = tempfile.mkstemp(suffix=".ply")[1]
-    tm = trimesh.Trimesh(V, F, process=False)
-    tm.visual.vertex_colors = np.full((len(V), 4), 255, np.uint8)
-    tm.export(path)
-    return path
 
 
 def main():

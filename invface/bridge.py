@@ -50,9 +50,3 @@ class SurfaceFunction:
     def __call__(self, p):
         return dr.custom(_SurfaceOp, self.model, p)
 
-
-def as_points(flat, point_type):
-    """(3V,) flat Float -> Array3f-like ``point_type`` by dr.gather (not dr.unravel, whose
-    reverse-mode gradient is wrong on drjit 1.5 when the flat array has other consumers)."""
-    idx = dr.arange(dr.uint32_array_t(type(flat)), dr.width(flat) // 3)
-    return point_type(*(dr.gather(type(flat), flat, 3 * idx + k) for k in range(3)))

@@ -231,7 +231,6 @@ def _read_scan(path):
 
 def cmd_fit_scan(args):
     """Fit controls and pose to a 3D scan (Eq. 13); write fit.json and the fitted mesh."""
-    import trimesh
     from tqdm import tqdm
 
     from .fit.scan import fit_scan
@@ -253,7 +252,7 @@ def cmd_fit_scan(args):
     tmp = out / "fit.json.tmp"
     tmp.write_text(json.dumps(summary, indent=1))
     tmp.replace(out / "fit.json")
-    trimesh.Trimesh(fit.surface, model.triangles, process=False).export(out / "fitted.ply")
+    _save_mesh(out / "fitted.ply", fit.surface, model.triangles)
     e = summary["error_mm"]
     print(f"{args.model_kind} fit: {summary['iterations']} iterations ({fit.status}), "
           f"{summary['seconds']:.1f} s; error median {e['median']:.3f} mm, max {e['max']:.3f} mm; "

@@ -102,14 +102,14 @@ def resample(poly, n):
 
 
 def projection_jacobian(camera, xr):
-    """Pixels (n, 2) of world points xr (n, 3) and d pixel / d x (n, 2, 3)."""
-    pc = xr @ camera.R.T + camera.t
-    X, Y, Z = pc.T
-    fx, fy = camera.K[0, 0], camera.K[1, 1]
-    uv = np.stack([fx * X / Z + camera.K[0, 2] + camera.K[0, 1] * Y / Z, fy * Y / Z + camera.K[1, 2]], 1)
-    dcam = np.zeros((len(xr), 2, 3))
-    dcam[:, 0, 0], dcam[:, 0, 2] = fx / Z, -fx * X / Z ** 2
-    dcam[:, 1, 1], dcam[:, 1, 2] = fy / Z, -fy * Y / Z ** 2
+    """Pixels (n, 2) of world points xr (n, 3) (``Camera.project``) and d pixel / d x (n, 2, 3)."""
+    uv, _ = camera.project(xr)
+    X, Y, Z = (xr @ camera.R.T + camera.t).T
+    K = camera.K
+    dcam = np.zeros((len(xr), 2, 3))             # d (u, v) / d (X, Y, Z) in the camera frame
+    dcam[:, 0, 0], dcam[:, 0, 1] = K[0, 0] / Z, K[0, 1] / Z
+    dcam[:, 0, 2] = -(K[0, 0] * X + K[0, 1] * Y) / Z ** 2
+    dcam[:, 1, 1], dcam[:, 1, 2] = K[1, 1] / Z, -K[1, 1] * Y / Z ** 2
     return uv, dcam @ camera.R
 
 

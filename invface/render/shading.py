@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..mesh.triangles import vertex_normals  # noqa: F401 - part of this module's API
+
 # Real SH normalisation constants of Y_lm, and the clamped-cosine convolution A_l per basis fn
 _Y = np.array([0.282095, 0.488603, 0.488603, 0.488603, 1.092548, 1.092548, 0.315392,
                1.092548, 0.546274])
@@ -46,17 +48,6 @@ def constant_light(radiance):
     g = np.zeros((SH_COUNT, 3))
     g[0] = np.broadcast_to(np.asarray(radiance, float), 3) * 4 * np.pi * _Y[0]
     return g
-
-
-def vertex_normals(vertices, triangles):
-    """Area-weighted unit vertex normals (V, 3) of a triangle mesh (float64)."""
-    v = np.asarray(vertices, float)
-    f = np.asarray(triangles)
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    n = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(n, f[:, k], fn)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
 
 
 def vertex_radiance(vertices, triangles, gamma, albedo):

@@ -33,6 +33,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..mesh.tets import boundary_faces
+from ..mesh.triangles import vertex_normals
 
 CONTACT_SMOOTHING = 2e-5     # m: the cubic onset of the contact penalty
 
@@ -45,15 +46,6 @@ def penalty(gap, k, d=CONTACT_SMOOTHING):
     de = -np.where(cubic, k * s ** 2 / (2 * d), k * (s - 0.5 * d))
     dde = np.where(cubic, k * s / d, k)
     return e, de, dde
-
-
-def vertex_normals(X, faces, n_vertices):
-    """Area-weighted unit vertex normals (N,3) of triangles faces (F,3) at positions X."""
-    fn = np.cross(X[faces[:, 1]] - X[faces[:, 0]], X[faces[:, 2]] - X[faces[:, 0]])
-    vn = np.zeros((n_vertices, 3))
-    for k in range(3):
-        np.add.at(vn, faces[:, k], fn)
-    return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
 
 
 @dataclass
