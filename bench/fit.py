@@ -40,6 +40,12 @@ def main():
             sec = time.perf_counter() - t0
             print(f"{kind:>11} {lam:7.0e} {sec:8.2f} {len(fit.history):4d} {np.abs(fit.p - p).max():9.2e} "
                   f"{fit.error.max() * 1000:10.4f}", flush=True)
+    # path dependence: the true controls solved warm (from the last fit's state) vs cold
+    warm = model.surface_model("simulation").surface(p)
+    cold = (scan - tr) @ euler_xyz(rot)
+    d = np.linalg.norm(warm - cold, axis=1) * 1000
+    print(f"simulation at the true controls, warm vs cold start: max {d.max():.3f} mm "
+          f"(vertex {int(d.argmax())}), median {np.median(d):.4f} mm")
 
 
 if __name__ == "__main__":

@@ -79,6 +79,9 @@ def test_fit_scan_command(small_expressive_model, tmp_path):
     fit = json.loads((tmp_path / "out" / "fit.json").read_text())
     assert abs(fit["weights"]["lipCornerPull_L"] - 0.6) < 1e-3 and fit["error_mm"]["max"] < 0.01
     assert (tmp_path / "out" / "fitted.ply").exists()
+    (tmp_path / "junk.ply").write_bytes(b"not a mesh at all")
+    r = run("fit-scan", str(tmp_path / "junk.ply"), "--resolution", str(SMALL_RESOLUTION))
+    assert r.returncode == 2 and "junk.ply" in r.stderr and "Traceback" not in r.stderr
     trimesh.Trimesh(x[:-10], m.triangles[:100], process=False).export(tmp_path / "other.ply")
     r = run("fit-scan", str(tmp_path / "other.ply"), "--resolution", str(SMALL_RESOLUTION))
     assert r.returncode == 2 and "--mode nearest" in r.stderr and "Traceback" not in r.stderr

@@ -24,6 +24,7 @@ def test_closest_point_on_polyline():
 def test_projection_jacobian_matches_camera_and_finite_differences():
     cam = Camera.front_view(720, 540)
     cam.K[0, 2] += 13.0
+    cam.K[0, 1] = 2.5                                  # skew
     x = np.random.default_rng(0).normal(0, 0.05, (6, 3))
     uv, J = projection_jacobian(cam, x)
     np.testing.assert_allclose(uv, cam.project(x)[0], atol=1e-9)
@@ -33,6 +34,22 @@ def test_projection_jacobian_matches_camera_and_finite_differences():
         d[k] = h
         fd = (projection_jacobian(cam, x + d)[0] - projection_jacobian(cam, x - d)[0]) / (2 * h)
         np.testing.assert_allclose(J[:, :, k], fd, rtol=1e-5, atol=1e-3)
+
+
+def test_curve_objective_jacobian_matches_finite_differences(small_expressive_model):
+    from invface.fit.curves import CurveObjective
+    m = small_expressive_model
+    cam = Camera.front_view(720, 540)
+    p = m.parameters({"lipCornerPull_L": 0.6, "jaw": [0.1, 0, 0, 0, 0, 0]})
+    curves = _plate_curves(m, cam, PLATE_CURVES, p)
+    obj = CurveObjective(m, m.surface_model("blendshape"), cam, curves, 3600.0)
+    z = np.r_[np.full(len(p), 0.3), ROT + 0.01, TR]
+    r, J = obj(z)
+    for k in (0, 4, len(p) - 6, len(p), len(p) + 2, len(p) + 4):     # weights, jaw, pose
+        e = np.zeros(len(z))
+        e[k] = 1e-6
+        fd = (obj(z + e)[0] - obj(z - e)[0]) / 2e-6
+        assert np.linalg.norm(fd - J[:, k]) < 1e-3 * np.linalg.norm(fd) + 1e-6, k
 
 
 def _plate_curves(model, cam, names, p, noise=0.3):
