@@ -1,12 +1,15 @@
-"""Fitting benchmark: seconds per 3D scan fit (Eq. 13) for both model kinds.
+"""Fitting benchmark: seconds per 3D scan fit (Eq. 13) and per plate frame (Eq. 15-16) for
+both model kinds.
 
-    python bench/fit.py [--resolution 1]
+    python bench/fit.py [--resolution 1] [--plates smile_blendshape,smile_simulation]
 
 A synthetic scan is made by the model itself (random controls, 30 % of the weights active,
 jaw 0.08 rad, rotation ~0.1 rad, a few mm of translation) and fitted from the neutral start
 with lambda = 1e-8 (noise-free scan) and the paper's 1e-6. Prints seconds, dogleg
 iterations, the largest control error and the surface error.
-(Plate fitting, Eq. 15-16, is issue 6's remaining work.)
+Plate fits: the sample plates (``render.synthetic.SAMPLES``, 720x540, rendered here) with
+their curve files and the true light and albedo; prints seconds per stage and the vertex
+error against the truth (posed, and shape only), non-zero weights and lip volume change.
 """
 from __future__ import annotations
 
@@ -23,6 +26,9 @@ from invface.model.rig import euler_xyz
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--resolution", type=float, default=1.0)
+    ap.add_argument("--plates", default="smile_blendshape,smile_simulation",
+                    help="sample plates to fit (comma-separated; '' skips plate fits)")
+    ap.add_argument("--no-scan", action="store_true", help="skip the scan fits")
     a = ap.parse_args()
     model = invface.template.build(resolution=a.resolution)
     K = len(model.blendshape_names)
@@ -30,6 +36,10 @@ def main():
     p = np.r_[np.where(rng.random(K) < 0.3, rng.uniform(0.2, 0.8, K), 0), [0.08, 0, 0, 0, 0, 0]]
     rot, tr = np.array([0.05, -0.1, 0.02]), np.array([0.003, -0.002, 0.005])
     print(f"head: {len(model.neutral)} vertices, {len(model.tets)} tets, K = {K}")
+    if a.plates:
+        plates(model, a.plates.split(","))
+    if a.no_scan:
+        return
     print(f"{'model':>11} {'lambda':>7} {'seconds':>8} {'its':>4} {'max |dp|':>9} {'max err mm':>10}")
     for kind in ("blendshape", "simulation"):
         scan = model.surface_model(kind).surface(p) @ euler_xyz(rot).T + tr
@@ -46,6 +56,34 @@ def main():
     d = np.linalg.norm(warm - cold, axis=1) * 1000
     print(f"simulation at the true controls, warm vs cold start: max {d.max():.3f} mm "
           f"(vertex {int(d.argmax())}), median {np.median(d):.4f} mm")
+
+
+def plates(model, names):
+    import tempfile
+
+    from invface.fit.calibrate import Calibration
+    from invface.fit.curves import read_curves
+    from invface.fit.plate import fit_plate, read_truth, vertex_errors
+    from invface.render.plates import load_plate
+    from invface.render.synthetic import skin_albedo, studio_light, write_sample_plates
+    K = len(model.blendshape_names)
+    cal = Calibration(gamma=studio_light(), albedo=skin_albedo(model))
+    print(f"{'plate':>18} {'model':>11} {'curves s':>8} {'shading s':>9} {'total s':>8} "
+          f"{'posed mm':>8} {'shape mm':>8} {'max mm':>7} {'weights':>7} {'lip vol':>8}")
+    with tempfile.TemporaryDirectory() as tmp:
+        for path in write_sample_plates(model, tmp, names=names):
+            plate = load_plate(path)
+            curves = read_curves(path.with_name(path.stem + ".curves.json"), model)
+            truth = read_truth(path.with_name(path.stem + ".truth.json"), model)
+            for kind in ("blendshape", "simulation"):
+                model._surface_models.clear()
+                fit = fit_plate(model, plate, cal, curves, kind=kind)
+                posed, shape = vertex_errors(model, fit, *truth)
+                sh = sum(v for k, v in fit.seconds.items() if k.startswith("shading"))
+                print(f"{path.stem:>18} {kind:>11} {fit.seconds['curves']:8.1f} {sh:9.1f} "
+                      f"{fit.seconds['total']:8.1f} {np.median(posed) * 1000:8.3f} {np.median(shape) * 1000:8.3f} "
+                      f"{shape.max() * 1000:7.2f} {int(np.sum(fit.p[:K] > 1e-2)):7d} "
+                      f"{100 * fit.lip_volume_change:+7.2f}%", flush=True)
 
 
 if __name__ == "__main__":

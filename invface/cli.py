@@ -253,6 +253,13 @@ def cmd_fit_scan(args):
     tmp.write_text(json.dumps(summary, indent=1))
     tmp.replace(out / "fit.json")
     _save_mesh(out / "fitted.ply", fit.surface, model.triangles)
+    import numpy as np
+    tmp = out / "fit.npz.tmp.npz"
+    np.savez_compressed(tmp, surface=fit.surface, triangles=model.triangles, neutral=model.neutral,
+                        vertex_error=fit.error, p=fit.p)
+    tmp.replace(out / "fit.npz")
+    from .report.fit import write_report
+    page = write_report(out, title=f"invface scan fit: {Path(args.scan).name}")
     e = summary["error_mm"]
     print(f"{args.model_kind} fit: {summary['iterations']} iterations ({fit.status}), "
           f"{summary['seconds']:.1f} s; error median {e['median']:.3f} mm, max {e['max']:.3f} mm; "
@@ -262,12 +269,119 @@ def cmd_fit_scan(args):
     if fit.activations:
         top = sorted(fit.activations.items(), key=lambda kv: -kv[1])[:5]
         print("strongest muscles: " + ", ".join(f"{k} {v:.3f}" for k, v in top))
-    print(f"wrote {out / 'fit.json'} and {out / 'fitted.ply'}")
+    print(f"wrote {out / 'fit.json'}, {out / 'fitted.ply'} and the report {page}")
+    return 0
+
+
+PLATE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr")
+
+
+def _plate_curves(model, plate, curves_path):
+    """The plate's curves: --curves, else PLATE.curves.json beside it, else the detector."""
+    from .fit.curves import read_curves
+    from .fit.landmarks import detect_curves
+    from .render.plates import linear_to_srgb
+    path = Path(plate.path)
+    side = path.with_name(path.stem + ".curves.json")
+    if curves_path is None and side.is_file():
+        curves_path = side
+    if curves_path is not None:
+        return read_curves(curves_path, model, image_size=plate.camera.size), str(curves_path)
+    return detect_curves(linear_to_srgb(plate.image), name=str(path)), "landmark detector"
+
+
+def fit_plate_frame(model, plate, cal, curves, kinds, out, starts=None, iterations=25, shading=True,
+                    source="", title=None):
+    """Fit one plate with each model kind, write out/<kind>/fit.{json,npz} and out/index.html.
+    Returns {kind: PlateFit}."""
+    import numpy as np
+    from tqdm import tqdm
+
+    from .fit.plate import fit_plate, read_truth, vertex_errors, write_plate_fit
+    from .report.fit import write_report
+    path = Path(plate.path)
+    truth_path = path.with_name(path.stem + ".truth.json")
+    truth = read_truth(truth_path, model) if truth_path.is_file() else None
+    fits = {}
+    for kind in kinds:
+        bar = tqdm(desc=f"{path.name}: {kind} fit", unit="eval", leave=False)
+
+        def progress(h, bar=bar):
+            bar.update(1)
+            bar.set_postfix(stage=h.get("stage"), cost=f"{h.get('cost', 0):.4g}")
+        try:
+            fit = fit_plate(model, plate, cal, curves, kind=kind, start=(starts or {}).get(kind),
+                            shading=shading, max_iter_shading=iterations, progress=progress)
+        finally:
+            bar.close()
+        extra = {"curves_from": source}
+        if source == "landmark detector":
+            extra["notes"] = ["Curves from the automatic landmark detector (MediaPipe Face Landmarker)."]
+        line = ""
+        if truth is not None:
+            posed, shape = vertex_errors(model, fit, *truth)
+            extra["truth"] = {"file": str(truth_path), "made_by": truth[1]["kind"],
+                              "median_mm": float(np.median(posed) * 1000), "max_mm": float(posed.max() * 1000),
+                              "shape_median_mm": float(np.median(shape) * 1000),
+                              "shape_max_mm": float(shape.max() * 1000)}
+            line = (f"; vertex error vs truth: median {extra['truth']['median_mm']:.3f} mm posed, "
+                    f"{extra['truth']['shape_median_mm']:.3f} mm shape")
+        folder = out / kind
+        write_plate_fit(folder, model, fit, plate, curves, extra=extra)
+        if truth is not None:
+            with np.load(folder / "fit.npz", allow_pickle=False) as z:
+                arrays = {k: z[k] for k in z.files}
+            arrays["vertex_error"] = posed
+            tmp = folder / "fit.npz.tmp.npz"
+            np.savez_compressed(tmp, **arrays)
+            tmp.replace(folder / "fit.npz")
+        print(f"{path.name} {kind}: {fit.seconds['total']:.1f} s, curves {fit.curve_rms_px:.2f} px RMS, "
+              f"image RMS {fit.image_rms:.4f}, {int(np.sum(fit.p[:len(model.blendshape_names)] > 1e-2))} "
+              f"non-zero weights, lip volume {100 * fit.lip_volume_change:+.2f} %{line}", flush=True)
+        fits[kind] = fit
+    page = write_report(out, title=title or f"invface plate fit: {path.name}")
+    print(f"report: {page}")
+    return fits
+
+
+def cmd_fit_plate(args):
+    """Fit controls and pose to a plate, or to each frame of a folder (sequence mode)."""
+    from .fit.calibrate import Calibration
+    from .render.plates import load_plate
+    model = _load_model(args.model, args.resolution)
+    src = Path(args.plate)
+    if src.is_dir():
+        frames = sorted(f for f in src.iterdir() if f.suffix.lower() in PLATE_SUFFIXES)
+        if not frames:
+            raise InvfaceError(f"{src}: no plate images ({', '.join(PLATE_SUFFIXES)}) in this folder")
+    elif src.is_file():
+        frames = [src]
+    else:
+        raise InvfaceError(f"{src}: plate not found")
+    if args.curves and len(frames) > 1:
+        raise InvfaceError("--curves names one file; in sequence mode put FRAME.curves.json beside each frame")
+    cal = Calibration.load(args.calib, vertex_count=len(model.neutral))
+    kinds = ["blendshape", "simulation"] if args.model_kind == "both" else [args.model_kind]
+    out = Path(args.output) if args.output else Path("reports") / "fit-plate" / src.stem
+    starts = None
+    for frame in frames:
+        plate = load_plate(frame, camera=args.camera)
+        curves, source = _plate_curves(model, plate, args.curves)
+        folder = out / frame.stem if len(frames) > 1 else out
+        starts = fit_plate_frame(model, plate, cal, curves, kinds, folder, starts, args.iterations,
+                                 not args.no_shading, source)
+    return 0
+
+
+def cmd_report(args):
+    """(Re)write the HTML report of a fit folder."""
+    from .report.fit import write_report
+    print(f"report: {write_report(args.run)}")
     return 0
 
 
 def cmd_demo(args):
-    """Until fitting lands: build the template, pose the jaw, write previews."""
+    """Build the template, write previews and expression sheets, then calibrate and fit a plate."""
     from . import template
     from .report.preview import write_previews
     out = Path(args.out)
@@ -286,34 +400,30 @@ def cmd_demo(args):
         print(f"simulation contact sheet: {sheet}")
     (out / "summary.json").write_text(json.dumps(model.summary(), indent=2))
     print(f"wrote {out / 'template_head.npz'}, {len(paths)} preview images; open {paths[-1]}")
-    _demo_calibration(model, out)
+    _demo_fit(model, out)
     return 0
 
 
-def _demo_calibration(model, out):
-    """Render a synthetic neutral plate with a known light and albedo, calibrate on it."""
+def _demo_fit(model, out):
+    """Sample plates with known controls; calibrate on the neutral one (Eq. 14), fit the
+    simulation-made smile with both model kinds (Eq. 15-16), write the report."""
     import numpy as np
 
-    from .render.camera import Camera
-    from .render.plates import Plate, write_image
-    from .render.shading import vertex_normals, irradiance
-    from .render.synthetic import render_plate, skin_albedo, studio_light
-    print("lighting/albedo calibration (Eq. 14) on a synthetic neutral plate", flush=True)
-    cam = Camera.front_view(720, 540)
-    rot, tr = np.array([0.03, -0.12, 0.0]), np.array([0.0, 0.0, 0.0])
-    gamma, albedo = studio_light(), skin_albedo(model)
-    image, _ = render_plate(model, model.neutral, cam, gamma, albedo, rot, tr)
-    plate_path = write_image(out / "plates" / "neutral.exr", image)
-    cam.save(out / "plates" / "neutral.json")
-    cal = run_calibration(model, Plate(image=image, camera=cam, path=str(plate_path)),
-                          out / "calib.npz", rot, tr, 2500.0, 30)
-    from .model.rig import euler_xyz
-    n = vertex_normals(model.neutral @ euler_xyz(rot).T + tr, model.triangles)
-    E, Ef = irradiance(n, gamma), irradiance(n, cal.gamma)
-    k = albedo.mean(0) / cal.albedo.mean(0)
-    print(f"against the truth: irradiance {100 * np.sqrt(np.mean((E - Ef) ** 2) / np.mean(E ** 2)):.2f} % RMS, "
-          f"albedo {100 * np.sqrt(np.mean((cal.albedo * k - albedo) ** 2) / np.mean(albedo ** 2)):.2f} % RMS "
-          "(all vertices, up to the light/albedo scale)")
+    from .render.plates import load_plate
+    from .render.synthetic import write_sample_plates
+    folder = out / "plates"
+    print("rendering sample plates (known controls, light and albedo)", flush=True)
+    neutral, smile = write_sample_plates(model, folder, names=["neutral", "smile_simulation"],
+                                         progress=lambda m: print(f"  .. {m}", flush=True))
+    truth = json.loads((folder / "neutral.truth.json").read_text())
+    print("lighting/albedo calibration (Eq. 14) on the neutral plate", flush=True)
+    cal = run_calibration(model, load_plate(neutral), out / "calib.npz", np.asarray(truth["rotation"]),
+                          np.asarray(truth["translation"]), 2500.0, 30)
+    plate = load_plate(smile)
+    curves, source = _plate_curves(model, plate, None)
+    print("fitting the smile plate (made by the muscle simulation) with both models", flush=True)
+    fit_plate_frame(model, plate, cal, curves, ["blendshape", "simulation"], out / "fit-smile",
+                    source=source, title="invface demo: a simulation-made smile fitted by both models")
 
 
 def build_parser():
@@ -363,6 +473,23 @@ def build_parser():
     fs.add_argument("--max-iter", type=int, default=50, help="dogleg iterations at most (per round)")
     fs.add_argument("-o", "--output", default="reports/fit-scan", help="output folder")
     fs.set_defaults(func=cmd_fit_scan)
+    fp = sub.add_parser("fit-plate", help="fit controls and pose to a film plate: curves (Eq. 15), then "
+                                          "shape from shading (Eq. 16); a folder is a sequence")
+    fp.add_argument("plate", help="plate image (PNG/JPEG/EXR), or a folder of frames (warm-started in order)")
+    fp.add_argument("--calib", required=True, help="calibration from 'invface calibrate' (.npz)")
+    fp.add_argument("--curves", help="plate curve file (JSON); default PLATE.curves.json beside the plate, "
+                                     "else the automatic landmark detector")
+    fp.add_argument("--camera", help="JSON camera file (default: PLATE.json beside the plate, else the front view)")
+    fp.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
+    fp.add_argument("--resolution", type=float, default=1.0, help="template size factor when no --model")
+    fp.add_argument("--model-kind", choices=["blendshape", "simulation", "both"], default="blendshape")
+    fp.add_argument("--iterations", type=int, default=25, help="shape-from-shading iterations at most")
+    fp.add_argument("--no-shading", action="store_true", help="curves only (Eq. 15)")
+    fp.add_argument("-o", "--output", help="report folder (default reports/fit-plate/PLATE)")
+    fp.set_defaults(func=cmd_fit_plate)
+    rp = sub.add_parser("report", help="(re)write the HTML report of a fit folder")
+    rp.add_argument("run", help="folder with fit.json (or sub-folders with one each)")
+    rp.set_defaults(func=cmd_report)
     cam = sub.add_parser("camera", help="camera tools")
     camsub = cam.add_subparsers(dest="camera_command", required=True)
     cc = camsub.add_parser("calibrate", help="intrinsics and distortion from checkerboard images (OpenCV)")

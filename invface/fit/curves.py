@@ -165,15 +165,20 @@ def initial_pose(model, camera, curves, rotation=None, translation=None, samples
     solvePnP on arc-length resampled point pairs; the given pose is the PnP start."""
     import cv2
     from scipy.spatial.transform import Rotation
-    obj, img = [], []
-    for name, poly in curves.items():
-        obj.append(resample(model.neutral[model.curves[name]], samples))
-        img.append(resample(poly, samples))
-    obj, img = np.concatenate(obj), np.concatenate(img)
+    from ..model.rig import euler_xyz
     th = np.zeros(3) if rotation is None else np.asarray(rotation, float)
     t = np.zeros(3) if translation is None else np.asarray(translation, float)
+    obj, img = [], []
+    for name, poly in curves.items():
+        o, q = resample(model.neutral[model.curves[name]], samples), resample(poly, samples)
+        # pair points in the model curve's direction (plate curves may run either way)
+        u, _ = camera.project(o @ euler_xyz(th).T + t)
+        if np.linalg.norm(u[[0, -1]] - q[[0, -1]]) > np.linalg.norm(u[[0, -1]] - q[[-1, 0]]):
+            q = q[::-1]
+        obj.append(o)
+        img.append(q)
+    obj, img = np.concatenate(obj), np.concatenate(img)
     # camera-frame pose of the model: R_c R(theta), R_c t + t_c
-    from ..model.rig import euler_xyz
     R0 = camera.R @ euler_xyz(th)
     rvec, tvec = cv2.Rodrigues(R0)[0], (camera.R @ t + camera.t).reshape(3, 1)
     ok, rvec, tvec = cv2.solvePnP(obj, img, camera.K, None, rvec, tvec, useExtrinsicGuess=True,

@@ -42,10 +42,26 @@ def register():
             self.rr_depth = 1
             self.radiative_backprop = False
             self.sppi = 0
+            self.backplate = None
 
-        def _radiance(self, si, active):
+        def set_backplate(self, texture, to_pixel):
+            """Show ``texture`` (a ``mi.Texture2f`` of the plate) where rays miss the face:
+            ``to_pixel`` (3x3, world direction -> homogeneous texture coordinates, K R with
+            the image size folded in) finds the plate point behind each ray. None clears it."""
+            self.backplate = None if texture is None else (texture, mi.Matrix3f(to_pixel))
+
+        def _background(self, ray, active):
+            if self.backplate is None:
+                return mi.Spectrum(0.0)
+            texture, M = self.backplate
+            q = M @ mi.Vector3f(dr.detach(ray.d))
+            uv = mi.Point2f(q.x, q.y) / q.z
+            return mi.Spectrum(texture.eval(uv, active & (q.z > 0)))
+
+        def _radiance(self, si, active, ray=None):
             L = si.shape.eval_attribute_3(ATTRIBUTE, si, active)
-            return dr.select(active, mi.Spectrum(L), mi.Spectrum(0.0))
+            background = mi.Spectrum(0.0) if ray is None else self._background(ray, ~active)
+            return dr.select(active, mi.Spectrum(L), background)
 
         def sample(self, mode, scene, sampler, ray, depth, δL, state_in, active,
                    project=False, si_shade=None, **kwargs):
@@ -57,12 +73,12 @@ def register():
                 else:
                     si = si_shade
                 valid = mi.Bool(active) & si.is_valid()
-                L = self._radiance(si, valid)
+                L = self._radiance(si, valid, ray)
             state = [dr.zeros(mi.Ray3f), mi.Bool(False)] if project else L
             return L, valid, [], state
 
         def sample_radiance_difference(self, scene, ss, curr_depth, sampler, wavelengths, active):
-            # background: whatever lies behind the silhouette point (other face parts or nothing)
+            # background: whatever lies behind the silhouette point (other face parts, the plate)
             ray_bg = ss.spawn_ray(wavelengths)
             L_bg, _, _, _ = self.sample(dr.ADMode.Primal, scene, sampler, ray_bg, curr_depth,
                                         None, None, active, False, None)

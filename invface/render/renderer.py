@@ -14,7 +14,7 @@ posed vertices x_R = R(theta) x + t, stored in the mesh's ``vertex_color`` attri
 by the ``invface_vertex`` projective-sampling integrator (``integrator.py``). The scene is
 built once per renderer; each call only updates the traversed parameters, so Dr.Jit reuses
 its compiled kernels. Channel 3 is alpha (coverage), a mask for losses; the background is 0
-(or the backplate, when one is given: then alpha is 1 everywhere).
+(or the backplate, when one is given).
 Alpha carries no silhouette derivative: losses compare the RGB channels and use alpha only as
 a (constant) weight.
 """
@@ -58,8 +58,8 @@ class FaceRenderer:
     seed: the fixed sample seed (the same inputs give the same image). The defaults (8, 0.5)
     give < 5 % gradient noise on the controls at 720x540 in < 1 s (bench/RESULTS.md).
     backplate: an optional linear image (H, W, 3) shown behind the face (the plate itself),
-    so that silhouette derivatives see the plate's background rather than black: a grid with
-    one vertex per pixel centre far behind the head, carrying the image as vertex colours."""
+    so that silhouette derivatives see the plate's background rather than black: rays that
+    miss the face look the plate up (bilinearly) at their own pixel position."""
 
     def __init__(self, triangles, camera: Camera, spp=8, silhouette_spp=0.5, seed=0, backplate=None):
         if spp < 1:
@@ -82,37 +82,26 @@ class FaceRenderer:
         self.faces = mi.UInt(tri.ravel())
         scene = {"type": "scene", "integrator": {"type": NAME, "sppi": 0},
                  "sensor": camera.sensor_dict(spp=self.spp, sampler="multijitter"), "face": mesh}
-        if backplate is not None:
-            scene["backplate"] = self._backplate(np.asarray(backplate, np.float32))
         self.scene = mi.load_dict(scene)
         self.params = mi.traverse(self.scene)
         self.params.keep(["face.vertex_positions", f"face.{ATTRIBUTE}"])
         self.sensor = self.scene.sensors()[0]
         self.integrator = self.scene.integrator()
+        if backplate is not None:
+            self._backplate(np.asarray(backplate, np.float32))
 
-    def _backplate(self, image, depth=5.0):
-        """A mesh with a vertex at every pixel centre (and a ring of edge-replicated ones around
-        the image), ``depth`` m in front of the camera, whose vertex colours are the image:
-        rays through pixel centres see the image exactly, others its bilinear interpolation."""
+    def _backplate(self, image):
+        """Hand the plate to the integrator as a bilinear texture looked up where camera rays
+        miss the face: each such ray sees the plate at its own pixel position."""
         mi, cam = self.mi, self.camera
         h, w = image.shape[:2]
-        if (w, h) != cam.size:
+        if image.ndim != 3 or image.shape[2] != 3 or (w, h) != cam.size:
             raise ConfigError(f"backplate is {w}x{h} px, the camera is {cam.width}x{cam.height}")
-        image = np.pad(image, ((1, 1), (1, 1), (0, 0)), mode="edge")   # cover the border pixels
-        v, u = np.mgrid[-1:h + 1, -1:w + 1].astype(np.float64)
-        h, w = h + 2, w + 2
-        rays = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], 1) @ np.linalg.inv(cam.K).T
-        pts = (rays * depth - cam.t) @ cam.R                       # camera -> world
-        idx = np.arange(w * h).reshape(h, w)
-        a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
-        faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.uint32)
-        mesh = mi.Mesh("backplate", len(pts), len(faces), has_vertex_normals=False)
-        params = mi.traverse(mesh)
-        params["vertex_positions"] = mi.Float(pts.astype(np.float32).ravel())
-        params["faces"] = mi.UInt(faces.ravel())
-        params.update()
-        mesh.add_attribute(ATTRIBUTE, 3, mi.Float(image.reshape(-1, 3).astype(np.float32).ravel()))
-        return mesh
+        texture = mi.Texture2f(mi.TensorXf(np.ascontiguousarray(image, np.float32)),
+                               filter_mode=self.dr.FilterMode.Linear, wrap_mode=self.dr.WrapMode.Clamp)
+        # world direction -> camera frame -> pixels (centres at integers) -> texture [0, 1]^2
+        to_texture = np.array([[1 / w, 0, 0.5 / w], [0, 1 / h, 0.5 / h], [0, 0, 1]]) @ cam.K @ cam.R
+        self.integrator.set_backplate(texture, to_texture.astype(np.float32).tolist())
 
     def _as_float(self, a, n, name):
         if isinstance(a, np.ndarray) or isinstance(a, (list, tuple)):

@@ -1,0 +1,212 @@
+"""Fitting a film plate: curves (Eq. 15), then shape from shading (Eq. 16); one frame or a
+sequence of frames, each warm-started from the previous one.
+
+    fit = fit_plate(model, plate, calibration, curves, kind="simulation")
+    write_plate_fit(folder, model, fit, plate)         # fit.json + fit.npz, read by the report
+
+Stages (``PlateFit.history`` logs each):
+
+1. curves, Eq. 15, always with the blendshape rig: it is only the start w^ of Eq. 16, and on
+   the default head the simulation's curve solve took 62 s against 3 s;
+2. shading, Eq. 16, with the blendshape rig;
+3. for ``kind="simulation"``: shading again with the muscle simulation, from stage 2's
+   solution (a simulation evaluation costs ~5 s against ~1.3 s, and the two models share
+   their controls, so the cheap model does the long walk and the simulation the last steps).
+
+The calibration (gamma, albedo) comes from Eq. 14 on a neutral plate of the same actor and
+camera set-up.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ImageError, InvfaceError
+from .curves import fit_curves, projection_jacobian
+from .scan import posed_surface
+from .shading import fit_shading
+
+
+@dataclass
+class PlateFit:
+    """Result of one plate: parameters p (K+6,), pose, posed surface (V, 3) m, the render
+    (H, W, 3) linear, per-curve pixel residuals, the log of both stages, seconds per stage."""
+
+    kind: str
+    p: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    surface: np.ndarray
+    render: np.ndarray
+    residual_px: dict
+    image_rms: float
+    history: list = field(default_factory=list)
+    seconds: dict = field(default_factory=dict)
+    activations: dict = field(default_factory=dict)
+    lip_volume_change: float = 0.0
+    status: str = ""
+
+    @property
+    def curve_rms_px(self):
+        r = np.concatenate(list(self.residual_px.values())) if self.residual_px else np.zeros(1)
+        return float(np.sqrt(np.mean(r ** 2)))
+
+    def summary(self, model):
+        """JSON-ready dict of the result (weights by name, jaw, pose, activations, errors)."""
+        K = len(model.blendshape_names)
+        return {"kind": self.kind, "status": self.status,
+                "weights": dict(zip(model.blendshape_names, np.round(self.p[:K], 6).tolist())),
+                "jaw": self.p[K:].tolist(), "rotation": self.rotation.tolist(),
+                "translation": self.translation.tolist(),
+                "nonzero_weights": int(np.sum(self.p[:K] > 1e-2)),
+                "activations": {k: round(v, 6) for k, v in self.activations.items()},
+                "active_muscles": int(sum(v > 1e-2 for v in self.activations.values())),
+                "curve_rms_px": self.curve_rms_px, "image_rms": self.image_rms,
+                "lip_volume_change": self.lip_volume_change, "seconds": self.seconds,
+                "history": self.history}
+
+
+def check_plate(plate, path=""):
+    """Reject a plate with nothing to fit: non-finite, black or flat (no face)."""
+    img = np.asarray(plate, np.float32)
+    name = path or "plate"
+    if not np.all(np.isfinite(img)):
+        raise ImageError(f"{name}: non-finite pixel values")
+    if float(img.max()) < 1e-3:
+        raise ImageError(f"{name}: the plate is black (max {float(img.max()):.2g}): no face to fit")
+    if float(img.std()) < 1e-3:
+        raise ImageError(f"{name}: the plate is one flat colour: no face to fit")
+
+
+def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, shading=True,
+              max_iter_curves=50, max_iter_shading=25, max_iter_simulation=8, spp=8, progress=None):
+    """Fit one plate. plate: ``render.plates.Plate`` (linear, undistorted); calibration:
+    ``fit.calibrate.Calibration`` (gamma, albedo); curves: {name: (n, 2) px} plate curves;
+    kind: "blendshape" or "simulation"; start: the previous frame's PlateFit (sequence mode:
+    its controls and pose start this frame). Returns a PlateFit."""
+    if kind not in ("blendshape", "simulation"):
+        raise InvfaceError(f"unknown model kind '{kind}': use 'blendshape' or 'simulation'")
+    check_plate(plate.image, plate.path)
+    if calibration.albedo.shape != model.neutral.shape:
+        raise InvfaceError(f"calibration albedo has {len(calibration.albedo)} vertices, the model "
+                           f"{len(model.neutral)}: calibrate with this model")
+    cam = plate.camera
+    say = progress or (lambda h: None)
+    t0 = time.perf_counter()
+    p0 = None if start is None else start.p
+    rot = calibration.rotation if start is None else start.rotation
+    tr = calibration.translation if start is None else start.translation
+    cf = fit_curves(model, cam, curves, kind="blendshape", p0=p0, rotation=rot, translation=tr,
+                    max_iter=max_iter_curves,
+                    progress=lambda h: say(dict(h, stage="curves")))
+    history = [dict(h, stage="curves") for h in cf.history]
+    seconds = {"curves": time.perf_counter() - t0}
+    p, rot, tr, status = cf.p, cf.rotation, cf.translation, f"curves: {cf.status}"
+    stages = [("shading", "blendshape", max_iter_shading)]
+    if kind == "simulation":
+        stages.append(("shading-simulation", "simulation", max_iter_simulation))
+    for stage, skind, iters in stages if shading else []:
+        t1 = time.perf_counter()
+        sf = fit_shading(model, cam, plate.image, calibration.gamma, calibration.albedo, cf.p, rot, tr,
+                         kind=skind, curves=curves, max_iter=iters, p0=p, spp=spp,
+                         progress=lambda h: say(dict(h, stage=stage)))
+        history += [dict(h, stage=stage) for h in sf.history]
+        seconds[stage] = time.perf_counter() - t1
+        p, rot, tr = sf.p, sf.rotation, sf.translation
+        status += f"; {stage}: {sf.status}"
+    sm = model.surface_model(kind)
+    P = len(p)
+    _, xr = posed_surface(sm, np.r_[p, rot, tr], P)
+    from ..measure.volume import lip_volume_change
+    from ..render.renderer import FaceRenderer
+    render = FaceRenderer(model.triangles, cam, spp=spp, backplate=plate.image).image(
+        xr, calibration.gamma, calibration.albedo)[..., :3]
+    residual = {}
+    for name, poly in curves.items():
+        from .curves import closest_on_polyline
+        uv, _ = projection_jacobian(cam, xr[model.curves[name]])
+        residual[name] = np.linalg.norm(uv - closest_on_polyline(uv, poly), axis=1)
+    acts, X = {}, None
+    if kind == "simulation":
+        res = sm.result_at(p)
+        acts = {m.name: float(v) for m, v in zip(model.muscles, res.tracks.activations)}
+        X = res.X
+    seconds["total"] = time.perf_counter() - t0
+    return PlateFit(kind=kind, p=p, rotation=rot, translation=tr, surface=xr, render=render,
+                    residual_px=residual, image_rms=float(np.sqrt(np.mean((render - plate.image) ** 2))),
+                    history=history, seconds=seconds, activations=acts,
+                    lip_volume_change=lip_volume_change(model, p, X), status=status)
+
+
+def _json_safe(o):
+    if isinstance(o, dict):
+        return {k: _json_safe(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_json_safe(v) for v in o]
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, float) and not np.isfinite(o):
+        return None
+    return o
+
+
+def write_plate_fit(folder, model, fit, plate, curves, extra=None):
+    """Write ``fit.json`` (summary) and ``fit.npz`` (plate, render, posed surface, curves,
+    camera) into ``folder`` atomically; the report (``invface.report.fit``) reads them."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    summary = dict(fit.summary(model), plate=str(plate.path), **(extra or {}))
+    names = sorted(curves)
+    arrays = {"plate": plate.image.astype(np.float32), "render": fit.render.astype(np.float32),
+              "surface": fit.surface, "triangles": np.asarray(model.triangles),
+              "neutral": model.neutral, "p": fit.p,
+              "camera": np.array(json.dumps(plate.camera.to_dict())),
+              "curve_names": np.array(names)}
+    for i, n in enumerate(names):
+        arrays[f"curve_{i}"] = np.asarray(curves[n], float)
+        arrays[f"model_curve_{i}"] = projection_jacobian(plate.camera, fit.surface[model.curves[n]])[0]
+    tmp = folder / "fit.npz.tmp.npz"
+    np.savez_compressed(tmp, **arrays)
+    os.replace(tmp, folder / "fit.npz")
+    tmp = folder / "fit.json.tmp"
+    tmp.write_text(json.dumps(_json_safe(summary), indent=1))
+    os.replace(tmp, folder / "fit.json")
+    return folder / "fit.json"
+
+
+def read_truth(path, model):
+    """Ground truth of a synthetic plate (``<plate>.truth.json``, written by
+    ``render.synthetic.write_sample_plates``): the posed surface (V, 3) made by the model kind
+    it names, and the dict."""
+    from ..jsonfile import read_object
+    t = read_object(path, what="ground-truth file")
+    try:
+        K = len(model.blendshape_names)
+        p = np.zeros(K + 6)
+        for name, v in t["weights"].items():
+            p[model.blendshape_names.index(name)] = float(v)
+        p[K:] = np.asarray(t.get("jaw", np.zeros(6)), float)
+        z = np.r_[p, np.asarray(t["rotation"], float), np.asarray(t["translation"], float)]
+        kind = t["kind"]
+    except (KeyError, ValueError, TypeError) as e:
+        raise InvfaceError(f"{path}: bad ground-truth file ({e})") from None
+    return posed_surface(model.surface_model(kind), z, K + 6)[1], t
+
+
+def vertex_errors(model, fit, truth_surface, truth):
+    """Per-vertex distances (V,) m to the truth: posed (what the camera sees, including the
+    depth error of the monocular pose) and shape only (both surfaces unposed: the shape the
+    controls make)."""
+    from ..model.rig import euler_xyz
+
+    def unpose(x, rot, tr):
+        return (x - np.asarray(tr, float)) @ euler_xyz(np.asarray(rot, float))
+    posed = np.linalg.norm(fit.surface - truth_surface, axis=1)
+    shape = np.linalg.norm(unpose(fit.surface, fit.rotation, fit.translation)
+                           - unpose(truth_surface, truth["rotation"], truth["translation"]), axis=1)
+    return posed, shape

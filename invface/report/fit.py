@@ -1,0 +1,194 @@
+"""HTML reports of plate and scan fits: ``write_report(run_folder)``.
+
+A run folder holds one fit (``fit.json`` + ``fit.npz``, written by ``fit.plate.write_plate_fit``
+or ``fit.scan``'s CLI) or several, one per sub-folder (the model kinds of one plate). The page
+``index.html`` shows, per fit: plate, render, a wipe (left plate, right render), the
+per-pixel error heat map, the plate curves (green) and projected model curves (red), the 3D
+error heat map on the mesh (vertex error against a known truth, or the scan distance; else
+the motion from the neutral), bar charts of blendshape weights and muscle activations,
+the convergence plot, timings and all parameters as JSON; and a comparison table of the
+fits (vertex error, lip-region volume change, non-zero controls). Everything is a file next
+to the page: it works offline.
+"""
+from __future__ import annotations
+
+import html
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InvfaceError
+from ..render.plates import linear_to_srgb
+
+
+def _png(path, rgb):
+    """Write a float RGB image in [0, 1] (already display-encoded) as PNG, atomically."""
+    import cv2
+    img = (np.clip(rgb, 0, 1) * 255 + 0.5).astype(np.uint8)
+    tmp = Path(str(path) + ".tmp.png")
+    cv2.imwrite(str(tmp), img[..., ::-1])
+    os.replace(tmp, path)
+    return Path(path).name
+
+
+def _heat(values, vmax):
+    """Colour map (magma) of values / vmax in [0, 1] -> (..., 3)."""
+    from matplotlib import colormaps
+    return colormaps["magma"](np.clip(values / max(vmax, 1e-12), 0, 1))[..., :3]
+
+
+def _figure(path, draw, size=(6, 3)):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=size, dpi=110)
+    draw(ax)
+    fig.tight_layout()
+    tmp = Path(str(path) + ".tmp.png")
+    fig.savefig(tmp)
+    plt.close(fig)
+    os.replace(tmp, path)
+    return Path(path).name
+
+
+def _bars(path, values, title, unit):
+    names = list(values)
+    v = np.array([values[n] for n in names], float)
+
+    def draw(ax):
+        ax.bar(range(len(v)), v, color=np.where(v > 1e-2, "#c0392b", "#95a5a6"))
+        ax.set_xticks(range(len(v)))
+        ax.set_xticklabels(names, rotation=90, fontsize=6)
+        ax.set_ylabel(unit)
+        ax.set_title(f"{title} ({int(np.sum(v > 1e-2))} of {len(v)} above 0.01)", fontsize=9)
+    return _figure(path, draw, (7, 3.2))
+
+
+def _convergence(path, history):
+    def draw(ax):
+        for stage, colour in (("curves", "#2980b9"), ("shading", "#c0392b"), (None, "#2c3e50")):
+            h = [e for e in history if e.get("stage") == stage and "cost" in e]
+            if h:
+                ax.semilogy([e.get("seconds", i) if stage == "shading" else i for i, e in enumerate(h)],
+                            [max(e["cost"], 1e-12) for e in h], "o-", ms=2, color=colour,
+                            label=stage or "dogleg")
+        ax.set_xlabel("iteration (curves, dogleg) / seconds (shading)")
+        ax.set_ylabel("cost")
+        ax.legend(fontsize=7)
+        ax.set_title("convergence", fontsize=9)
+    return _figure(path, draw)
+
+
+def _curves_overlay(path, plate_srgb, data):
+    import cv2
+    img = (np.clip(plate_srgb, 0, 1) * 255).astype(np.uint8).copy()
+    names = [str(n) for n in data.get("curve_names", [])]
+    for i in range(len(names)):
+        for key, colour in ((f"curve_{i}", (40, 200, 40)), (f"model_curve_{i}", (220, 40, 40))):
+            if key in data:
+                pts = np.round(data[key] * 4).astype(np.int32)      # 2 bits of sub-pixel precision
+                cv2.polylines(img, [pts], False, colour, 1, cv2.LINE_AA, shift=2)
+    return _png(path, img / 255.0)
+
+
+def _mesh_heat(path, data, summary):
+    from ..render.preview import look_at_camera, render_meshes, to_srgb8
+    x, F = data["surface"], data["triangles"]
+    if "vertex_error" in data:
+        e, label = data["vertex_error"] * 1000, "vertex error"
+    else:
+        e, label = np.linalg.norm(x - x.mean(0) - (data["neutral"] - data["neutral"].mean(0)), axis=1) * 1000, \
+            "motion from the neutral"
+    vmax = max(float(np.percentile(e[np.isfinite(e)], 99)), 0.5)
+    colours = _heat(np.nan_to_num(e), vmax)
+    c = x.mean(0)
+    size = float(np.ptp(x, axis=0).max())
+    cam = look_at_camera(c + [0, 0, 2.2 * size], c, width=360, height=360, spp=32)
+    img = render_meshes([(x, F, colours)], cam, key_dir=(0, 0.3, 1.0))
+    name = _png(path, to_srgb8(img) / 255.0)
+    finite = e[np.isfinite(e)]
+    summary["mesh_heat"] = {"label": label, "scale_mm": vmax, "median_mm": float(np.median(finite)),
+                            "max_mm": float(finite.max())}
+    return name
+
+
+def _fit_images(folder):
+    """Pictures of one fit folder; returns (summary dict, {caption: file})."""
+    folder = Path(folder)
+    summary = json.loads((folder / "fit.json").read_text())
+    pics = {}
+    with np.load(folder / "fit.npz", allow_pickle=False) as z:
+        data = {k: z[k] for k in z.files}
+    if "plate" in data:
+        plate, render = linear_to_srgb(data["plate"]), linear_to_srgb(data["render"])
+        pics["plate"] = _png(folder / "plate.png", plate)
+        pics["render"] = _png(folder / "render.png", render)
+        w = plate.shape[1] // 2
+        wipe = np.concatenate([plate[:, :w], render[:, w:]], 1)
+        wipe[:, w - 1:w + 1] = [1, 1, 0]
+        pics["wipe (plate | render)"] = _png(folder / "wipe.png", wipe)
+        err = np.abs(data["render"] - data["plate"]).mean(-1)
+        scale = max(float(np.percentile(err, 99.5)), 1e-3)
+        pics[f"per-pixel error (linear, black 0, white {scale:.3f})"] = _png(folder / "error.png", _heat(err, scale))
+        pics["curves: plate (green), model (red)"] = _curves_overlay(folder / "curves.png", plate, data)
+    pics["3D heat map"] = _mesh_heat(folder / "mesh_error.png", data, summary)
+    pics["blendshape weights"] = _bars(folder / "weights.png", summary["weights"], "blendshape weights", "weight")
+    if summary.get("activations"):
+        pics["muscle activations"] = _bars(folder / "activations.png", summary["activations"],
+                                           "muscle activations", "activation")
+    if summary.get("history"):
+        pics["convergence"] = _convergence(folder / "convergence.png", summary["history"])
+    return summary, pics
+
+
+COMPARE = (("model", lambda s: s["kind"]),
+           ("vertex error median / max (mm)", lambda s: (f"{s['truth']['median_mm']:.3f} / {s['truth']['max_mm']:.2f}"
+                                                       if "truth" in s else "-")),
+           ("lip volume change", lambda s: f"{100 * s['lip_volume_change']:+.2f} %" if "lip_volume_change" in s else "-"),
+           ("non-zero weights", lambda s: s.get("nonzero_weights", "-")),
+           ("active muscles", lambda s: s.get("active_muscles", "-") if s.get("activations") else "-"),
+           ("curve RMS (px)", lambda s: f"{s['curve_rms_px']:.2f}" if "curve_rms_px" in s else "-"),
+           ("image RMS (linear)", lambda s: f"{s['image_rms']:.4f}" if "image_rms" in s else "-"),
+           ("seconds", lambda s: " + ".join(f"{k} {v:.1f}" for k, v in s.get("seconds", {}).items())))
+
+
+def write_report(run, title=None):
+    """Write ``run/index.html`` for the fit(s) in ``run``. Returns its path."""
+    run = Path(run)
+    folders = [run] if (run / "fit.json").is_file() else sorted(p.parent for p in run.glob("*/fit.json"))
+    if not folders:
+        raise InvfaceError(f"{run}: no fit.json here or in its sub-folders; run fit-plate or fit-scan first")
+    sections, rows = [], []
+    for f in folders:
+        try:
+            summary, pics = _fit_images(f)
+        except (OSError, ValueError, KeyError) as e:
+            raise InvfaceError(f"{f}: unreadable fit result ({e})") from None
+        rel = os.path.relpath(f, run)
+        rows.append(summary)
+        figs = "".join(f'<figure><img src="{html.escape(os.path.join(rel, p))}"><figcaption>{html.escape(c)}'
+                       "</figcaption></figure>" for c, p in pics.items())
+        notes = "".join(f"<p class=note>{html.escape(n)}</p>" for n in summary.get("notes", []))
+        heat = summary.get("mesh_heat", {})
+        sections.append(
+            f"<h2>{html.escape(summary['kind'])} model</h2>{notes}"
+            f"<p>status: {html.escape(str(summary.get('status', '')))}; 3D heat map: {html.escape(heat.get('label', ''))}, "
+            f"scale 0-{heat.get('scale_mm', 0):.2f} mm, median {heat.get('median_mm', 0):.3f} mm</p>"
+            f"<div class=grid>{figs}</div>"
+            f"<details><summary>all parameters (JSON)</summary><pre>{html.escape(json.dumps({k: v for k, v in summary.items() if k != 'history'}, indent=1))}</pre></details>")
+    head = "".join(f"<th>{html.escape(n)}</th>" for n, _ in COMPARE)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(fn(s)))}</td>" for _, fn in COMPARE) + "</tr>" for s in rows)
+    title = title or f"invface fit report: {run.name}"
+    page = (f"<!doctype html><html><head><meta charset=utf-8><title>{html.escape(title)}</title><style>"
+            "body{font-family:sans-serif;margin:2em;max-width:1500px}table{border-collapse:collapse}"
+            "td,th{border:1px solid #ccc;padding:4px 8px;font-size:90%}.grid{display:flex;flex-wrap:wrap;gap:8px}"
+            "figure{margin:0}figure img{max-width:480px;border:1px solid #ddd}figcaption{font-size:80%;color:#555}"
+            ".note{background:#fff6d5;padding:6px}</style></head><body>"
+            f"<h1>{html.escape(title)}</h1><table><tr>{head}</tr>{body}</table>{''.join(sections)}</body></html>")
+    out = run / "index.html"
+    tmp = run / "index.html.tmp"
+    tmp.write_text(page)
+    os.replace(tmp, out)
+    return out
