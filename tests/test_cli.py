@@ -85,3 +85,23 @@ def test_fit_scan_command(small_expressive_model, tmp_path):
     trimesh.Trimesh(x[:-10], m.triangles[:100], process=False).export(tmp_path / "other.ply")
     r = run("fit-scan", str(tmp_path / "other.ply"), "--resolution", str(SMALL_RESOLUTION))
     assert r.returncode == 2 and "--mode nearest" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_fit_plate_command_rejects_black_plates_and_unknown_curves(small_expressive_model, tmp_path):
+    import json
+
+    from invface.fit.calibrate import Calibration
+    from invface.render.plates import write_image
+    from invface.render.synthetic import skin_albedo, studio_light
+    m = small_expressive_model
+    Calibration(gamma=studio_light(), albedo=skin_albedo(m)).save(tmp_path / "calib.npz")
+    write_image(tmp_path / "black.png", np.zeros((60, 80, 3), np.float32))
+    (tmp_path / "black.curves.json").write_text(json.dumps({"curves": {"lip_outer_upper": [[1, 2], [3, 4]]}}))
+    args = ("--calib", str(tmp_path / "calib.npz"), "--resolution", str(SMALL_RESOLUTION))
+    r = run("fit-plate", str(tmp_path / "black.png"), *args)
+    assert r.returncode == 2 and "black.png" in r.stderr and "black" in r.stderr and "Traceback" not in r.stderr
+    (tmp_path / "bad.json").write_text(json.dumps({"curves": {"left_ear": [[1, 2], [3, 4]]}}))
+    r = run("fit-plate", str(tmp_path / "black.png"), "--curves", str(tmp_path / "bad.json"), *args)
+    assert r.returncode == 2 and "left_ear" in r.stderr and "Traceback" not in r.stderr
+    r = run("fit-plate", str(tmp_path / "missing.png"), *args)
+    assert r.returncode == 2 and "not found" in r.stderr
