@@ -317,7 +317,7 @@ def fit_plate_frame(model, plate, cal, curves, kinds, out, starts=None, iteratio
         extra = {"curves_from": source}
         if source == "landmark detector":
             extra["notes"] = ["Curves from the automatic landmark detector (MediaPipe Face Landmarker)."]
-        line = ""
+        line, posed = "", None
         if truth is not None:
             posed, shape = vertex_errors(model, fit, *truth)
             extra["truth"] = {"file": str(truth_path), "made_by": truth[1]["kind"],
@@ -327,14 +327,7 @@ def fit_plate_frame(model, plate, cal, curves, kinds, out, starts=None, iteratio
             line = (f"; vertex error vs truth: median {extra['truth']['median_mm']:.3f} mm posed, "
                     f"{extra['truth']['shape_median_mm']:.3f} mm shape")
         folder = out / kind
-        write_plate_fit(folder, model, fit, plate, curves, extra=extra)
-        if truth is not None:
-            with np.load(folder / "fit.npz", allow_pickle=False) as z:
-                arrays = {k: z[k] for k in z.files}
-            arrays["vertex_error"] = posed
-            tmp = folder / "fit.npz.tmp.npz"
-            np.savez_compressed(tmp, **arrays)
-            tmp.replace(folder / "fit.npz")
+        write_plate_fit(folder, model, fit, plate, curves, extra=extra, vertex_error=posed)
         print(f"{path.name} {kind}: {fit.seconds['total']:.1f} s, curves {fit.curve_rms_px:.2f} px RMS, "
               f"image RMS {fit.image_rms:.4f}, {int(np.sum(fit.p[:len(model.blendshape_names)] > 1e-2))} "
               f"non-zero weights, lip volume {100 * fit.lip_volume_change:+.2f} %{line}", flush=True)

@@ -113,6 +113,12 @@ def projection_jacobian(camera, xr):
     return uv, dcam @ camera.R
 
 
+def rms_px(residual_px):
+    """RMS (px) over all curves of {name: (n,) pixel distances}; 0 with no curves."""
+    r = np.concatenate(list(residual_px.values())) if residual_px else np.zeros(1)
+    return float(np.sqrt(np.mean(r ** 2)))
+
+
 @dataclass
 class CurveFit:
     """Eq. 15 result: controls p, pose, pixel residuals per curve, the dogleg log."""
@@ -126,8 +132,7 @@ class CurveFit:
 
     @property
     def rms_px(self):
-        r = np.concatenate(list(self.residual_px.values()))
-        return float(np.sqrt(np.mean(r ** 2)))
+        return rms_px(self.residual_px)
 
 
 class CurveObjective:

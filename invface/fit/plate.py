@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ImageError, InvfaceError
-from .curves import fit_curves, projection_jacobian
+from .curves import CurveObjective, fit_curves, projection_jacobian, rms_px
 from .scan import posed_surface
 from .shading import fit_shading
 
@@ -53,8 +53,7 @@ class PlateFit:
 
     @property
     def curve_rms_px(self):
-        r = np.concatenate(list(self.residual_px.values())) if self.residual_px else np.zeros(1)
-        return float(np.sqrt(np.mean(r ** 2)))
+        return rms_px(self.residual_px)
 
     def summary(self, model):
         """JSON-ready dict of the result (weights by name, jaw, pose, activations, errors)."""
@@ -126,11 +125,8 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     from ..render.renderer import FaceRenderer
     render = FaceRenderer(model.triangles, cam, spp=spp, backplate=plate.image).image(
         xr, calibration.gamma, calibration.albedo)[..., :3]
-    residual = {}
-    for name, poly in curves.items():
-        from .curves import closest_on_polyline
-        uv, _ = projection_jacobian(cam, xr[model.curves[name]])
-        residual[name] = np.linalg.norm(uv - closest_on_polyline(uv, poly), axis=1)
+    residual = {k: np.linalg.norm(v, axis=1)
+                for k, v in CurveObjective(model, sm, cam, curves, 0.0).residuals(xr).items()}
     acts, X = {}, None
     if kind == "simulation":
         res = sm.result_at(p)
@@ -155,9 +151,10 @@ def _json_safe(o):
     return o
 
 
-def write_plate_fit(folder, model, fit, plate, curves, extra=None):
+def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=None):
     """Write ``fit.json`` (summary) and ``fit.npz`` (plate, render, posed surface, curves,
-    camera) into ``folder`` atomically; the report (``invface.report.fit``) reads them."""
+    camera, and the per-vertex error (V,) m against a truth when given) into ``folder``
+    atomically; the report (``invface.report.fit``) reads them."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     summary = dict(fit.summary(model), plate=str(plate.path), **(extra or {}))
@@ -167,6 +164,8 @@ def write_plate_fit(folder, model, fit, plate, curves, extra=None):
               "neutral": model.neutral, "p": fit.p,
               "camera": np.array(json.dumps(plate.camera.to_dict())),
               "curve_names": np.array(names)}
+    if vertex_error is not None:
+        arrays["vertex_error"] = np.asarray(vertex_error, float)
     for i, n in enumerate(names):
         arrays[f"curve_{i}"] = np.asarray(curves[n], float)
         arrays[f"model_curve_{i}"] = projection_jacobian(plate.camera, fit.surface[model.curves[n]])[0]

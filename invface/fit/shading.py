@@ -29,7 +29,7 @@ import numpy as np
 from ..errors import ImageError
 from ..render.renderer import FaceRenderer
 from .curves import CurveObjective
-from .scan import control_bounds, posed_jacobian, posed_surface
+from .scan import control_bounds, posed_jacobian
 
 LAMBDA_1 = 1e-4        # paper 000, Eq. 16: weight of the curve term (pixels^2)
 LAMBDA_2 = 1.0         # paper 000, Eq. 16: pull towards the curve solution w^
@@ -93,12 +93,11 @@ class Pyramid:
 
 @dataclass
 class ShadingFit:
-    """Eq. 16 result: controls p, pose, image RMS (linear), the iteration log."""
+    """Eq. 16 result: controls p, pose, the iteration log."""
 
     p: np.ndarray
     rotation: np.ndarray
     translation: np.ndarray
-    rms: float
     history: list = field(default_factory=list)
     status: str = ""
 
@@ -124,10 +123,6 @@ class ShadingObjective:
         self.p_hat, self.lam1, self.lam2 = np.asarray(p_hat, float), lam1, lam2
         self.curves = CurveObjective(model, surface_model, camera, curves, 0.0) if curves else None
         self.terms = {}
-
-    def image(self, xr):
-        """numpy (H, W, 3) render of posed vertices xr (V, 3)."""
-        return self.renderer.image(xr, self.gamma, self.albedo)[..., :3]
 
     def __call__(self, z):
         dr, mi = self.dr, self.renderer.mi
@@ -197,9 +192,6 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     # The sampled image is piecewise constant where silhouettes cross fixed samples, so the
     # line search can stop on a sample pattern; restarting with fresh samples continues.
     for restart in range(restarts + 1):
-        left = max_iter - sum(1 for h in history if h.get("restart", 0) == restart)
-        if restart and left <= 0:
-            break
         obj.renderer.seed = obj.renderer.seed + restart
         res = minimize(lambda v: fun(v, restart), u, jac=True, method="L-BFGS-B", bounds=bounds,
                        options={"maxiter": max_iter, "maxfun": 2 * max_iter, "ftol": 1e-7, "gtol": 1e-6})
@@ -207,7 +199,4 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
         if "ABNORMAL" not in status or len(history) >= 2 * max_iter:
             break
     z = u * s
-    _, xr = posed_surface(sm, z, P)
-    rms = float(np.sqrt(np.mean((obj.image(xr) - obj.plate) ** 2)))
-    return ShadingFit(p=z[:P], rotation=z[P:P + 3], translation=z[P + 3:], rms=rms, history=history,
-                      status=status)
+    return ShadingFit(p=z[:P], rotation=z[P:P + 3], translation=z[P + 3:], history=history, status=status)
