@@ -7,7 +7,7 @@ A synthetic scan is made by the model itself (random controls, 30 % of the weigh
 jaw 0.08 rad, rotation ~0.1 rad, a few mm of translation) and fitted from the neutral start
 with lambda = 1e-8 (noise-free scan) and the paper's 1e-6. Prints seconds, dogleg
 iterations, the largest control error and the surface error.
-Plate fits: the sample plates (``render.synthetic.SAMPLES``, 720x540, rendered here) with
+Plate fits: the sample plates (``fit.samples.SAMPLES``, 720x540, rendered here) with
 their curve files and the true light and albedo; prints seconds per stage and the vertex
 error against the truth (posed, and shape only), non-zero weights and lip volume change.
 """
@@ -65,7 +65,8 @@ def plates(model, names):
     from invface.fit.curves import read_curves
     from invface.fit.plate import fit_plate, read_truth, vertex_errors
     from invface.render.plates import load_plate
-    from invface.render.synthetic import skin_albedo, studio_light, write_sample_plates
+    from invface.fit.samples import write_sample_plates
+    from invface.render.synthetic import skin_albedo, studio_light
     K = len(model.blendshape_names)
     cal = Calibration(gamma=studio_light(), albedo=skin_albedo(model))
     print(f"{'plate':>18} {'model':>11} {'curves s':>8} {'shading s':>9} {'total s':>8} "

@@ -403,7 +403,7 @@ def _demo_fit(model, out):
     import numpy as np
 
     from .render.plates import load_plate
-    from .render.synthetic import write_sample_plates
+    from .fit.samples import write_sample_plates
     folder = out / "plates"
     print("rendering sample plates (known controls, light and albedo)", flush=True)
     neutral, smile = write_sample_plates(model, folder, names=["neutral", "smile_simulation"],

@@ -5,7 +5,7 @@
 from pathlib import Path
 
 import invface
-from invface.render.synthetic import write_sample_plates
+from invface.fit.samples import write_sample_plates
 
 if __name__ == "__main__":
     model = invface.template.build()

@@ -97,7 +97,7 @@ def test_fit_plate_recovers_a_blendshape_plate(small_expressive_model, tmp_path)
 def test_sample_plates_carry_their_truth(small_expressive_model, tmp_path):
     from invface.fit.curves import read_curves
     from invface.render.plates import load_plate
-    from invface.render.synthetic import write_sample_plates
+    from invface.fit.samples import write_sample_plates
     m = small_expressive_model
     (path,) = write_sample_plates(m, tmp_path, names=["smile_blendshape"], size=(160, 120))
     plate = load_plate(path)                                   # the camera comes from the sidecar

@@ -180,7 +180,7 @@ def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=
 
 def read_truth(path, model):
     """Ground truth of a synthetic plate (``<plate>.truth.json``, written by
-    ``render.synthetic.write_sample_plates``): the posed surface (V, 3) made by the model kind
+    ``fit.samples.write_sample_plates``): the posed surface (V, 3) made by the model kind
     it names, and the dict."""
     from ..jsonfile import read_object
     t = read_object(path, what="ground-truth file")

@@ -1,0 +1,76 @@
+"""Sample plates with ground truth: the template rendered with known controls, pose, light
+and albedo, by the blendshape rig or by the muscle simulation, with the curve files a roto
+artist would draw (``plates/`` ships them; tests, the demo and ``bench/fit.py`` make them).
+
+It sits in ``fit`` rather than ``render`` because it needs the fitting side's plate curves and
+the simulation, which ``render`` must not import (DESIGN.md, import direction).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..render.camera import Camera
+from ..render.synthetic import render_plate, skin_albedo, studio_light
+from .curves import PLATE_CURVES, projection_jacobian, write_curves
+
+# name -> (model kind that makes it, blendshape weights, jaw (6,), head rotation, translation)
+SAMPLES = {
+    "neutral": ("blendshape", {}, None, (0.03, -0.12, 0.0), (0.0, 0.0, 0.0)),
+    "smile_blendshape": ("blendshape", {"lipCornerPull_L": 0.7, "lipCornerPull_R": 0.6, "cheekRaise": 0.3},
+                         (0.03, 0, 0, 0, 0, 0), (0.04, -0.1, 0.01), (0.002, -0.001, 0.003)),
+    "brows_blendshape": ("blendshape", {"browInnerUp_L": 0.6, "browInnerUp_R": 0.6, "browOuterUp_L": 0.4},
+                         None, (-0.03, 0.08, 0.0), (-0.002, 0.002, 0.0)),
+    "smile_simulation": ("simulation", {"lipCornerPull_L": 0.7, "lipCornerPull_R": 0.6, "cheekRaise": 0.3},
+                         (0.03, 0, 0, 0, 0, 0), (0.04, -0.1, 0.01), (0.002, -0.001, 0.003)),
+    "pucker_simulation": ("simulation", {"lipPucker": 0.8}, None, (0.0, 0.1, -0.02), (0.0, 0.001, -0.002)),
+    "open_simulation": ("simulation", {"lipsPart": 0.5, "lowerLipDepress": 0.4}, (0.12, 0, 0, 0, 0, 0),
+                        (0.06, -0.05, 0.0), (0.0, 0.0, 0.0)),
+}
+
+
+def sample_camera(width=720, height=540):
+    """The sample plates' camera: 30 degrees, 0.72 m in front of the face (brow to chin in view)."""
+    return Camera.front_view(width, height, eye=(0.0, 0.0, 0.72), target=(0.0, 0.0, 0.0))
+
+
+def write_sample_plates(model, folder, names=None, size=(720, 540), noise=0.005, curve_noise=0.3,
+                        progress=None):
+    """Render the SAMPLES into ``folder``: NAME.png (sRGB 8-bit), NAME.json (camera),
+    NAME.truth.json (the controls, pose and model kind that made it) and NAME.curves.json
+    (the model's plate curves projected from the truth, with ``curve_noise`` px of noise).
+    Deterministic. Returns the plate paths."""
+    import json
+    from pathlib import Path
+
+    from ..model.rig import euler_xyz
+    from ..render.plates import write_image
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    cam = sample_camera(*size)
+    gamma, albedo = studio_light(), skin_albedo(model)
+    K = len(model.blendshape_names)
+    out = []
+    for i, name in enumerate(names or SAMPLES):
+        kind, weights, jaw, rot, tr = SAMPLES[name]
+        if progress:
+            progress(f"plate {name} ({kind} model)")
+        p = np.zeros(K + 6)
+        for k, v in weights.items():
+            p[model.blendshape_names.index(k)] = v
+        if jaw is not None:
+            p[K:] = jaw
+        x = model.surface_model(kind).surface(p)
+        image, _ = render_plate(model, x, cam, gamma, albedo, rot, tr, noise=noise, seed=i)
+        path = write_image(folder / f"{name}.png", image)
+        cam.save(folder / f"{name}.json")
+        truth = {"kind": kind, "weights": weights, "jaw": p[K:].tolist(), "rotation": list(rot),
+                 "translation": list(tr), "light": "studio_light()", "albedo": "skin_albedo(model, seed=0)",
+                 "noise": noise}
+        (folder / f"{name}.truth.json").write_text(json.dumps(truth, indent=1))
+        xr = x @ euler_xyz(np.asarray(rot)).T + np.asarray(tr)
+        rng = np.random.default_rng(100 + i)
+        curves = {c: projection_jacobian(cam, xr[model.curves[c]])[0] for c in PLATE_CURVES}
+        curves = {c: v + rng.normal(0, curve_noise, v.shape) for c, v in curves.items()}
+        write_curves(folder / f"{name}.curves.json", curves, image_size=cam.size)
+        out.append(path)
+    return out
