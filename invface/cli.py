@@ -31,8 +31,7 @@ def cmd_build_model(args):
     from .model import FaceModel
     t0 = time.perf_counter()
     if args.neutral:
-        raise InvfaceError("building a model from a scan (--neutral) needs the morph pipeline (paper 001), "
-                           "which this version does not include yet; use --template")
+        return _build_from_scan(args, t0)
     if args.template or not args.input:
         print(f"building the template head (resolution {args.resolution:g})", flush=True)
         model = template.build(resolution=args.resolution, force=args.force, progress=_progress)
@@ -46,6 +45,35 @@ def cmd_build_model(args):
         from .report.preview import write_previews
         paths = write_previews(model, args.preview)
         print(f"previews: {len(paths)} images in {args.preview} (contact sheet: {paths[-1]})")
+    return 0
+
+
+def _build_from_scan(args, t0):
+    """build-model --neutral: morph the template onto the actor's scan (paper 001)."""
+    import json
+
+    from . import template
+    from .morph.build import build_model
+    if not args.output:
+        raise InvfaceError("build-model --neutral needs -o/--output for the new model (.npz)")
+    tpl = template.build(resolution=args.resolution, progress=_progress)
+    model, result = build_model(args.neutral, blendshapes=args.blendshapes, template=tpl, unit=args.unit,
+                                expressions=args.expressions, progress=_progress)
+    model.save(args.output)
+    st = result.stats
+    print(f"wrote {args.output}")
+    print(f"scan unit {st['unit']} (x{st['scale']:g} to metres); symmetry error {st['symmetry_error_mm']:.2f} mm; "
+          f"alignment residual {st['alignment_residual_mm']:.2f} mm")
+    print(f"skin to scan: mean {st['surface_to_target_mm']['mean']:.3f} mm, max {st['surface_to_target_mm']['max']:.2f} mm; "
+          f"{100 * st['snapped_fraction']:.1f}% of the template skin on the scan")
+    print("stage seconds: " + json.dumps(result.seconds))
+    _print_summary(model, time.perf_counter() - t0)
+    if args.preview:
+        from .report.morph import write_morph_preview
+        from .report.preview import write_previews
+        sheet = write_morph_preview(model, result, args.preview, template=tpl)
+        write_previews(model, args.preview)
+        print(f"previews in {args.preview} (morph sheet: {sheet})")
     return 0
 
 
@@ -426,6 +454,11 @@ def build_parser():
     b.add_argument("input", nargs="?", help="an existing bundle to summarise/preview")
     b.add_argument("--template", action="store_true", help="the built-in template head (default)")
     b.add_argument("--neutral", help="the actor's neutral scan (OBJ/PLY) to morph the template onto")
+    b.add_argument("--blendshapes", metavar="DIR", help="the actor's blendshapes (OBJ/PLY, the neutral's topology)")
+    b.add_argument("--unit", choices=["m", "cm", "mm"], help="the scan's unit (default: found from its size)")
+    b.add_argument("--expressions", choices=["simulate", "copy", "none"], default="simulate",
+                   help="without --blendshapes: simulate the template's action units on the new anatomy "
+                        "(default), copy the template's shapes, or none")
     b.add_argument("--resolution", type=float, default=1.0, help="template size factor (1 = ~35k tets)")
     b.add_argument("--force", action="store_true", help="regenerate instead of using the cache")
     b.add_argument("-o", "--output", help="write the bundle here (.npz)")

@@ -35,6 +35,9 @@ def closest_on_triangles(p, a, b, c):
     for cond, weights in cases:
         if cond.any():
             w = np.where(cond[:, None], weights(), w)
+    bad = ~np.isfinite(w).all(1)          # collapsed triangles: their first vertex
+    if bad.any():
+        w[bad] = (1.0, 0.0, 0.0)
     return w
 
 

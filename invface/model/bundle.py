@@ -71,6 +71,8 @@ def save_bundle(model, path):
         arrays["blendshape_activations"] = m.blendshape_activations
     if m.track_displacements is not None:
         arrays["track_displacements"] = m.track_displacements
+    if m.scan_transform is not None:
+        arrays["scan_transform"] = np.asarray(m.scan_transform, np.float64)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     try:
@@ -205,6 +207,7 @@ def load_bundle(path):
         jverts = r.get("jaw_vertices", "f", (None, 3))
         acts = r.get("blendshape_activations", "f", (K, M), optional=True)
         track = r.get("track_displacements", "f", (K, N, 3), optional=True)
+        scan_tf = r.get("scan_transform", "f", (4, 4), optional=True)
         return FaceModel(
             neutral=neutral, triangles=triangles, blendshape_names=[str(s) for s in header["blendshape_names"]],
             blendshapes=blendshapes, jaw_pivot=r.get("jaw_pivot", "f", (3,)), jaw_frame=r.get("jaw_frame", "f", (3, 3)),
@@ -215,5 +218,6 @@ def load_bundle(path):
             curves={str(k): v for k, v in zip(header["curve_names"], _split(cv, cv_off))},
             cranium_mesh=(cverts, r.ids("cranium_triangles", len(cverts), (None, 3))),
             jaw_mesh=(jverts, r.ids("jaw_triangles", len(jverts), (None, 3))),
-            blendshape_activations=acts, track_displacements=track, meta=dict(header.get("meta", {})),
+            blendshape_activations=acts, track_displacements=track, scan_transform=scan_tf,
+            meta=dict(header.get("meta", {})),
         )

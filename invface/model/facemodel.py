@@ -65,6 +65,7 @@ class FaceModel:
     jaw_mesh: tuple                     # (vertices (Bj,3), triangles (Fj,3))
     blendshape_activations: np.ndarray = None   # (K, M) activations that made each shape
     track_displacements: np.ndarray = None      # (K,N,3) Poisson dX_k (paper 000 Eq. 11)
+    scan_transform: np.ndarray = None           # (4,4) input scan frame -> model frame (morphed models)
     meta: dict = field(default_factory=dict)
     _surface_models: dict = field(default_factory=dict, repr=False, compare=False)
 

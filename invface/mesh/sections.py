@@ -1,0 +1,109 @@
+"""Plane sections of triangle meshes as ordered polylines, and arc-length parametrisation."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def unique_edges(F):
+    """Unique undirected edges (E,2) of triangles F (F,3) and, per triangle, its 3 edge ids
+    (F,3) in the order (v0v1, v1v2, v2v0)."""
+    F = np.asarray(F, np.int64)
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    e.sort(axis=1)
+    edges, inv = np.unique(e, axis=0, return_inverse=True)
+    return edges, inv.reshape(3, len(F)).T
+
+
+@dataclass
+class Section:
+    """One connected chain of a plane section: points (n,3), the mesh edge each point lies
+    on (n,2 vertex ids) and its position t along that edge (n,), closed or open."""
+    points: np.ndarray
+    edges: np.ndarray
+    t: np.ndarray
+    closed: bool
+
+    @property
+    def length(self):
+        return float(arc_length(self.points)[-1])
+
+
+def arc_length(P):
+    """Cumulative arc length (n,) of polyline P (n,3), starting at 0."""
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))])
+
+
+def resample(P, s_new, s=None):
+    """Points of polyline P (n,3) at arc lengths s_new (m,) (s: P's own arc lengths)."""
+    s = arc_length(P) if s is None else s
+    return np.stack([np.interp(s_new, s, P[:, k]) for k in range(P.shape[1])], 1)
+
+
+def plane_sections(V, F, origin, normal):
+    """All connected chains where the plane (origin, normal) cuts the mesh (V (n,3), F (f,3)).
+
+    Each crossed edge gives one point; two crossed edges of a triangle are joined. Returns a
+    list of Section, longest first. Vertices exactly on the plane are nudged to one side.
+    """
+    V, F = np.asarray(V, float), np.asarray(F, np.int64)
+    normal = np.asarray(normal, float) / np.linalg.norm(normal)
+    d = (V - origin) @ normal
+    d = np.where(d == 0, 1e-12, d)
+    edges, tri_edges = unique_edges(F)
+    da, db = d[edges[:, 0]], d[edges[:, 1]]
+    crossed = (da * db) < 0
+    cross_ids = np.flatnonzero(crossed)
+    if len(cross_ids) == 0:
+        return []
+    node = -np.ones(len(edges), np.int64)
+    node[cross_ids] = np.arange(len(cross_ids))
+    t = da[cross_ids] / (da[cross_ids] - db[cross_ids])
+    e = edges[cross_ids]
+    pts = V[e[:, 0]] + t[:, None] * (V[e[:, 1]] - V[e[:, 0]])
+    tn = node[tri_edges]                                   # (F,3) node per triangle edge or -1
+    hit = (tn >= 0).sum(1) == 2
+    pair = np.sort(tn[hit], axis=1)[:, 1:]                 # the two non-negative entries
+    adj = [[] for _ in range(len(cross_ids))]
+    for a, b in pair:
+        adj[a].append(b)
+        adj[b].append(a)
+    seen = np.zeros(len(cross_ids), bool)
+    chains = []
+    # open chains start at degree-1 nodes; what remains is closed loops
+    starts = [i for i in range(len(adj)) if len(adj[i]) == 1] + list(range(len(adj)))
+    for s in starts:
+        if seen[s]:
+            continue
+        chain, prev, cur = [s], -1, s
+        seen[s] = True
+        while True:
+            nxt = [n for n in adj[cur] if n != prev and not seen[n]]
+            if not nxt:
+                break
+            prev, cur = cur, nxt[0]
+            seen[cur] = True
+            chain.append(cur)
+        closed = len(chain) > 2 and chain[0] in adj[chain[-1]]
+        if closed:
+            chain.append(chain[0])
+        c = np.array(chain)
+        chains.append(Section(pts[c], e[c], t[c], closed))
+    chains.sort(key=lambda c: -c.length)
+    return chains
+
+
+def point_to_polyline(points, P):
+    """Closest points on polyline P (n,3) to points (m,3): (arc length (m,), distance (m,))."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    a, b = P[:-1], P[1:]
+    ab = b - a
+    L2 = np.maximum((ab ** 2).sum(1), 1e-30)
+    u = np.clip(np.einsum("mkj,kj->mk", points[:, None, :] - a[None], ab) / L2, 0, 1)
+    q = a[None] + u[..., None] * ab[None]
+    dist = np.linalg.norm(q - points[:, None, :], axis=2)
+    k = np.argmin(dist, axis=1)
+    s = arc_length(P)
+    rows = np.arange(len(points))
+    return s[k] + u[rows, k] * np.sqrt(L2[k]), dist[rows, k]

@@ -1,0 +1,197 @@
+"""Build a simulatable FaceModel for a new actor by morphing the template (paper 001).
+
+Pipeline: clean the scan (target.py) -> orientation, symmetry and rigid alignment to the
+template (orient.py) -> fixed-stencil curvature and landmarks (curvature.py, landmarks.py)
+-> feature curves (curves.py) -> surface Poisson morph, snapping, inverted-triangle
+relaxation, partial-scan completion (surface.py) -> volumetric morph of flesh, bones,
+muscles, relaxation of bad tets (volume.py) -> blendshapes (imported from the actor's files,
+or the template's expressions re-simulated on the new anatomy, or copied) -> muscle-track
+precompute (paper 000 Eq. 10-11).
+
+The new model keeps the template's topology (surface, tets, muscles, landmark and curve ids),
+so everything built for the template (rig, simulation, fitting, reports) works on it; its
+``scan_transform`` maps the input scan's coordinates into the model frame.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError, MeshError
+from ..mesh.closest import closest_points
+from ..mesh.tets import locate, quality_summary
+from ..model.facemodel import FaceModel
+from .blendshapes import read_blendshapes, recognised
+from .curves import curve_set
+from .landmarks import find_landmarks, template_landmarks
+from .orient import align_to_template
+from .surface import SurfacePoisson, morph_surface
+from .target import Target, clean, load_target
+from .volume import carry_fibers, carry_points, inside_fraction, morph_volume
+
+EXPRESSIONS = ("simulate", "copy", "none")
+
+
+@dataclass
+class MorphResult:
+    """What the build found and did, for reports and previews (model-frame coordinates)."""
+    target: Target
+    aligned: np.ndarray                     # (n,3) target vertices in the model frame
+    landmarks: dict                         # name -> (3,) on the target
+    template_landmarks: dict                # name -> (3,) on the template
+    curves: dict                            # (from, to) -> (S,3) on the target
+    template_curves: dict
+    surface: object                         # SurfaceMorph
+    seconds: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+
+
+def _transfer(values, surf, Fg, solver):
+    """Per-target-vertex values (K,n,3) -> template vertices (K,V,3) through the snap
+    correspondence; vertices off the target get the surface Poisson extension."""
+    out = np.einsum("vk,Kvkj->Kvj", surf.target_weights, values[:, Fg[surf.target_triangles]])
+    if not surf.snapped.all():
+        fixed = np.flatnonzero(surf.snapped)
+        out = np.array([solver.solve(fixed, d[fixed]) for d in out])
+    return out
+
+
+def build_model(neutral, blendshapes=None, template=None, unit=None, expressions="copy",
+                progress=None):
+    """Morph the template onto an actor's neutral scan. Returns (FaceModel, MorphResult).
+
+    neutral: path to an OBJ/PLY, or (vertices (n,3), faces (f,3)) in file units.
+    blendshapes: folder of OBJ/PLY files sharing the neutral's topology (optional).
+    template: the template FaceModel (default: the built-in one at resolution 1).
+    unit: 'm', 'cm' or 'mm' (default: found from the size).
+    expressions (without blendshapes): 'simulate' the template's action units on the new
+    anatomy, 'copy' the template's deltas, or 'none'.
+    """
+    if expressions not in EXPRESSIONS:
+        raise ConfigError(f"expressions must be one of {', '.join(EXPRESSIONS)}, got '{expressions}'")
+    say = progress or (lambda m: None)
+    secs = {}
+    t = time.perf_counter()
+
+    def lap(name):
+        nonlocal t
+        now = time.perf_counter()
+        secs[name] = round(now - t, 2)
+        t = now
+
+    if template is None:
+        from ..template import build as build_template
+        template = build_template()
+    if isinstance(neutral, (str, Path)):
+        say(f"reading {neutral}")
+        target = load_target(neutral, unit)
+        from .target import read_mesh
+        raw_V, _ = read_mesh(neutral)
+    else:
+        raw_V, raw_F = (np.asarray(a) for a in neutral)
+        target = clean(raw_V, raw_F, unit=unit)
+    lap("clean")
+    say(f"target: {len(target.vertices)} vertices, unit {target.unit}" +
+        (f" ({'; '.join(target.notes)})" if target.notes else ""))
+
+    say("orientation, symmetry plane and alignment to the template")
+    al = align_to_template(target.vertices, target.faces, template)
+    Va, Fg = al.apply(target.vertices), target.faces
+    if al.residual > 0.01:
+        raise MeshError(f"{target.name}: after alignment the scan lies {al.residual * 1000:.1f} mm (median) from "
+                        "the template's face; it does not look like a face, or too little of one")
+    lap("orient")
+
+    say("landmarks (fixed-stencil curvature)")
+    L, _ = find_landmarks(Va, Fg, template)
+    TL = template_landmarks(template)
+    lap("landmarks")
+
+    say("feature curves")
+    Cg = curve_set(Va, Fg, L)
+    Ct = curve_set(template.neutral, template.triangles, TL)
+    lap("curves")
+
+    surf = morph_surface(template.neutral, template.triangles, Va, Fg, Ct, Cg, progress=say)
+    lap("surface")
+
+    say("volume morph: flesh, bones, muscles")
+    q0 = template.meta.get("quality") or quality_summary(template.rest_positions, template.tets)
+    d = surf.positions - template.neutral
+    vm = morph_volume(template, d, min_radius_ratio=min(0.005, q0["min_radius_ratio"]), progress=say)
+    X0, X1, tets = template.rest_positions, vm.X, template.tets
+    muscles = [replace(m, fibers=carry_fibers(X0, X1, tets, m.tets, m.fibers),
+                       centerline=carry_points(X0, X1, tets, m.centerline)) for m in template.muscles]
+    cranium = (carry_points(X0, X1, tets, template.cranium_mesh[0]), template.cranium_mesh[1])
+    jaw = (carry_points(X0, X1, tets, template.jaw_mesh[0]), template.jaw_mesh[1])
+    pivot = carry_points(X0, X1, tets, template.jaw_pivot)[0]
+    et, ew = locate(X1, tets, surf.positions)
+    lap("volume")
+
+    model = FaceModel(
+        neutral=surf.positions, triangles=template.triangles, blendshape_names=[],
+        blendshapes=np.zeros((0, len(surf.positions), 3)), jaw_pivot=pivot, jaw_frame=template.jaw_frame.copy(),
+        jaw_weights=template.jaw_weights.copy(), rest_positions=X1, tets=tets,
+        fixed_cranium=template.fixed_cranium, fixed_jaw=template.fixed_jaw,
+        embed_tets=et, embed_weights=ew, volume_jaw_weights=template.volume_jaw_weights,
+        muscles=muscles, landmarks=dict(template.landmarks), curves=dict(template.curves),
+        cranium_mesh=cranium, jaw_mesh=jaw,
+    )
+    S = np.diag([target.scale] * 3 + [1.0])
+    A = np.eye(4)
+    A[:3, :3], A[:3, 3] = al.R, al.t
+    model.scan_transform = A @ S
+    # blendshapes
+    solver = SurfacePoisson(template.neutral, template.triangles)
+    names, kinds = [], {}
+    if blendshapes is not None:
+        say(f"importing blendshapes from {blendshapes}")
+        names, D = read_blendshapes(blendshapes, len(raw_V), np.asarray(raw_V, float))
+        D = (D[:, target.source_ids] * target.scale) @ al.R.T          # model frame, metres
+        model.blendshape_names = names
+        model.blendshapes = _transfer(D, surf, Fg, solver)
+        kinds = {n: recognised(n) for n in names}
+        model.meta["blendshape_jaw"] = {n: [0.0] * 6 for n in names}
+    elif expressions == "copy" and len(template.blendshape_names):
+        model.blendshape_names = list(template.blendshape_names)
+        model.blendshapes = template.blendshapes.copy()
+        model.blendshape_activations = template.blendshape_activations
+        model.meta["blendshape_jaw"] = dict(template.meta.get("blendshape_jaw", {}))
+        model.muscles = [replace(m, activation_curve=t.activation_curve) for m, t in zip(model.muscles, template.muscles)]
+    elif expressions == "simulate":
+        from ..template.expressions import calibrate_activation_curves, simulate_blendshapes
+        simulate_blendshapes(model, progress=say)
+        model.blendshape_names = list(model.blendshape_names)
+    lap("blendshapes")
+    if len(model.blendshape_names):
+        say("muscle-track precompute (paper 000 Eq. 10-11)")
+        from ..sim.poisson import track_displacements
+        model.track_displacements = track_displacements(model)
+        if expressions == "simulate" and blendshapes is None:
+            calibrate_activation_curves(model)
+    lap("tracks")
+
+    tri, bw, _ = closest_points(np.array([TL[k] for k in TL]), template.neutral, template.triangles)
+    on_model = dict(zip(TL, np.einsum("nk,nkj->nj", bw, model.neutral[template.triangles[tri]])))
+    dist = closest_points(model.neutral[surf.snapped], Va, Fg)[2]
+    q = quality_summary(X1, tets)
+    stats = {
+        "unit": target.unit, "scale": target.scale, "cleaning": target.notes,
+        "symmetry_error_mm": al.frame.symmetry_error * 1000,
+        "alignment_residual_mm": al.residual * 1000, "flipped_residual_mm": al.flipped_residual * 1000,
+        "landmark_to_morph_mm": {k: float(np.linalg.norm(on_model[k] - L[k]) * 1000) for k in L},
+        "surface_to_target_mm": {"mean": float(dist.mean() * 1000), "max": float(dist.max() * 1000)},
+        "snapped_fraction": float(surf.snapped.mean()), "inverted_triangles": surf.inverted,
+        "triangle_relax_rounds": surf.relax_rounds, "tet_relaxed_vertices": vm.relaxed_vertices, "inner_pushed": vm.pushed,
+        "tet_relax_rounds": vm.relax_rounds, "quality": q,
+        "centerlines_inside": inside_fraction(X1, tets, np.concatenate([m.centerline for m in muscles])),
+        "blendshapes": {n: kinds.get(n) for n in model.blendshape_names} if blendshapes is not None else expressions,
+    }
+    model.meta = {**model.meta, "generator": "invface.morph", "source": str(target.name),
+                  "template": {k: template.meta.get(k) for k in ("generator", "generator_version", "resolution")},
+                  "quality": q, "morph": {**stats, "seconds": secs}}
+    result = MorphResult(target, Va, L, TL, Cg, Ct, surf, secs, stats)
+    return model, result

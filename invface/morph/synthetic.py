@@ -1,0 +1,29 @@
+"""Synthetic actors for tests and benchmarks: the template skin under a smooth random
+deformation (identity change) and a random similarity transform (pose and unit)."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def random_identity(neutral, seed, amplitude=0.004, bumps=8, width=0.03, stretch=0.04):
+    """Deformed copy (V,3) m of ``neutral`` (V,3): a random anisotropic scale about the
+    centroid (sd ``stretch``) plus ``bumps`` Gaussian bumps of width ``width`` m and random
+    displacement (sd ``amplitude`` m per axis)."""
+    rng = np.random.default_rng(seed)
+    c = neutral.mean(0)
+    X = c + (neutral - c) * (1 + rng.normal(0, stretch, 3))
+    for _ in range(bumps):
+        p = neutral[rng.integers(len(neutral))]
+        w = np.exp(-np.sum((neutral - p) ** 2, 1) / (2 * width ** 2))
+        X += w[:, None] * rng.normal(0, amplitude, 3)
+    return X
+
+
+def random_pose(X, seed, unit=0.001, shift=0.2):
+    """X (V,3) m rotated by a uniformly random rotation, shifted by ~``shift`` m and written in
+    ``unit`` (metres per file unit). Returns (file coordinates (V,3), R (3,3), t (3,))."""
+    from scipy.spatial.transform import Rotation
+    rng = np.random.default_rng(seed + 1000)
+    R = Rotation.random(random_state=seed).as_matrix()
+    t = rng.normal(0, shift, 3)
+    return (X @ R.T + t) / unit, R, t

@@ -1,0 +1,139 @@
+"""Read and clean a target face mesh (the actor's neutral scan) before the morph.
+
+Cleaning follows paper 001 sec. 4: merge duplicated vertices, drop degenerate (tiny) and
+repeated triangles and unreferenced vertices, make the winding consistent and the normals
+point out of the head. Holes (eyes, mouth, neck, a partial scan's edge) are kept: the morph
+works on open surfaces. The unit is found from the size: a head or face is 0.12-0.6 m across.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MeshError
+
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+HEAD_SIZE_M = (0.12, 0.6)        # bounding-box diagonal of a face or head, metres
+MIN_TRIANGLES = 500
+MIN_AREA_M2 = 1e-9              # paper 001 sec. 4: smaller triangles are dropped
+
+
+@dataclass
+class Target:
+    """A cleaned target mesh in metres (its own orientation).
+
+    vertices (n,3) m; faces (f,3); unit: the file unit found or given; scale: metres per file
+    unit; source_ids (n,) the file vertex each cleaned vertex came from; notes: what cleaning did.
+    """
+    vertices: np.ndarray
+    faces: np.ndarray
+    unit: str
+    scale: float
+    source_ids: np.ndarray
+    name: str = "target"
+    notes: list = field(default_factory=list)
+
+
+def read_mesh(path):
+    """(vertices (n,3), faces (f,3)) of an OBJ/PLY file, unprocessed; clear errors."""
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError(f"{path}: mesh file not found")
+    try:
+        mesh = trimesh.load(path, process=False, force="mesh")
+    except Exception as e:  # noqa: BLE001 - trimesh raises many kinds
+        raise MeshError(f"{path}: not a readable mesh ({e})") from None
+    V = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), float)
+    F = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), np.int64)
+    if len(V) == 0 or len(F) == 0:
+        raise MeshError(f"{path}: the file holds no triangle mesh")
+    return V, F
+
+
+def detect_unit(V, name="target"):
+    """(unit name, metres per unit) that makes the mesh's diagonal a plausible head size."""
+    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    for unit, s in UNITS.items():
+        if HEAD_SIZE_M[0] <= diag * s <= HEAD_SIZE_M[1]:
+            return unit, s
+    raise MeshError(f"{name}: its bounding box is {diag:.4g} units across, which is no head size in "
+                    f"metres, centimetres or millimetres ({HEAD_SIZE_M[0]}-{HEAD_SIZE_M[1]} m); "
+                    "pass the unit explicitly (--unit) or rescale the file")
+
+
+def _components(F, n):
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]]])
+    A = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return connected_components(A, directed=False)[1]
+
+
+def clean(V, F, name="target", unit=None):
+    """Clean a raw mesh (file units) into a Target in metres. Raises MeshError naming ``name``."""
+    import trimesh
+
+    V, F = np.asarray(V, float), np.asarray(F, np.int64)
+    notes = []
+    if F.ndim != 2 or F.shape[1] != 3 or (len(F) and (F.min() < 0 or F.max() >= len(V))):
+        raise MeshError(f"{name}: faces must be triangles indexing its {len(V)} vertices")
+    if not np.isfinite(V).all():
+        raise MeshError(f"{name}: {int((~np.isfinite(V)).any(1).sum())} vertices are NaN or infinite")
+    if unit is None:
+        unit, scale = detect_unit(V, name)
+    else:
+        if unit not in UNITS:
+            raise MeshError(f"{name}: unknown unit '{unit}'; use one of {', '.join(UNITS)}")
+        scale = UNITS[unit]
+    V = V * scale
+    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    # duplicated vertices (within 1e-7 of the size): merge
+    key = np.round(V / (diag * 1e-7)).astype(np.int64)
+    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    if len(first) < len(V):
+        notes.append(f"merged {len(V) - len(first)} duplicated vertices")
+    src = first
+    V, F = V[first], inv.ravel()[F]
+    # degenerate, collapsed and repeated triangles
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    bad = (area < MIN_AREA_M2) | (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+    _, uniq = np.unique(np.sort(F, axis=1), axis=0, return_index=True)
+    rep = np.ones(len(F), bool)
+    rep[uniq] = False
+    if bad.any() or rep.any():
+        notes.append(f"dropped {int(bad.sum())} degenerate and {int((rep & ~bad).sum())} repeated triangles")
+    F = F[~bad & ~rep]
+    if len(F) < MIN_TRIANGLES:
+        raise MeshError(f"{name}: only {len(F)} usable triangles; a face scan needs at least {MIN_TRIANGLES}")
+    # keep the largest connected piece (stray bits of hair, eyeballs, scanning debris)
+    comp = _components(F, len(V))
+    tri_comp = comp[F[:, 0]]
+    big = np.bincount(tri_comp).argmax()
+    if (tri_comp != big).any():
+        notes.append(f"dropped {int((tri_comp != big).sum())} triangles in pieces apart from the face")
+        F = F[tri_comp == big]
+    used, inv = np.unique(F, return_inverse=True)
+    V, F, src = V[used], inv.reshape(-1, 3), src[used]
+    mesh = trimesh.Trimesh(V, F, process=False)
+    flipped_before = F.copy()
+    trimesh.repair.fix_winding(mesh)
+    F = np.asarray(mesh.faces, np.int64)
+    if (F != flipped_before).any():
+        notes.append(f"made the winding consistent ({int((F != flipped_before).any(1).sum())} triangles flipped)")
+    # normals out of the head: area-weighted normals point away from the centroid
+    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    c = V[F].mean(1)
+    if np.einsum("ij,ij->", fn, c - np.average(c, axis=0, weights=np.linalg.norm(fn, axis=1))) < 0:
+        F = F[:, [0, 2, 1]]
+        notes.append("flipped all normals to point out of the head")
+    return Target(V, F, unit, scale, src, name, notes)
+
+
+def load_target(path, unit=None):
+    """Read and clean a neutral scan (OBJ/PLY) into a Target in metres."""
+    V, F = read_mesh(path)
+    return clean(V, F, name=str(path), unit=unit)

@@ -1,0 +1,175 @@
+"""Volume morph of the template's anatomy (paper 001 sec. 8-9).
+
+The surface displacements of the morphed skin are the Dirichlet data of three volumetric
+Poisson equations (one per component) on the template's flesh tet mesh (linear-FEM Laplacian),
+the same operator as paper 000 Eq. 11: the tet vertices on the skin move with the skin (through
+the same skin-to-boundary correspondence), every other flesh vertex, the bone attachments
+included, gets the harmonic extension. Deviation: the paper solves on a background grid
+covering all of space; the template's bones are the inner boundary of its flesh, so the
+flesh mesh carries them (bone vertices, muscle centre-lines and the jaw pivot are moved by
+the displacement of the tet they lie in, or the nearest one, linearly extrapolated).
+Where the skin moves inward by more than the tissue is thick, the inner surface is pushed
+back first (collision processing, only the inner displacements change, then the field is
+solved again with both surfaces as Dirichlet data, as the paper does).
+Fibres follow the deformation gradient of their tet. Tets that invert or fall below the
+template's quality bound are relaxed (sec. 9: mass-spring relaxation of interior nodes,
+here a uniform-weight Laplacian smoothing of the non-skin vertices of the bad tets'
+neighbourhood), with the skin held.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from ..errors import MeshError
+from ..mesh.closest import closest_points
+from ..mesh.tets import (barycentric, boundary_faces, laplacian, locate, radius_ratio, shape_gradients,
+                         signed_volumes)
+from ..mesh.triangles import vertex_normals
+from ..sim.poisson import outer_boundary
+
+MIN_DEPTH_FRACTION = 0.7     # inner surfaces keep at least this much of the template's tissue depth
+
+
+@dataclass
+class VolumeMorph:
+    """Morphed rest positions X (N,3), the displacement field dX (N,3), the skin-boundary tet
+    vertex ids (B,), inner-surface vertices pushed back by collision processing, and
+    relaxation statistics."""
+    X: np.ndarray
+    dX: np.ndarray
+    boundary: np.ndarray
+    pushed: int
+    relaxed_vertices: int
+    relax_rounds: int
+
+
+def _harmonic(L, fixed, values):
+    N = L.shape[0]
+    free = np.setdiff1d(np.arange(N), fixed)
+    out = np.zeros((N, 3))
+    out[fixed] = values
+    out[free] = splu(L[free][:, free].tocsc()).solve(-(L[free][:, fixed] @ values))
+    return out
+
+
+def _depth(points, V, F):
+    """Signed depth (P,) of points below the skin (V, F): positive inside."""
+    tri, w, d = closest_points(points, V, F)
+    q = np.einsum("nk,nkj->nj", w, V[F[tri]])
+    n = np.einsum("nk,nkj->nj", w, vertex_normals(V, F)[F[tri]])
+    return np.where(np.einsum("ij,ij->i", points - q, n) > 0, -d, d), n
+
+
+def volume_displacement(model, surface_displacement, keep_depth=MIN_DEPTH_FRACTION):
+    """dX (N,3): harmonic extension of the skin displacement (V,3) into the flesh, and the
+    skin-boundary tet vertex ids (B,).
+
+    Collision processing (sec. 8): inner-surface vertices (bone, mucosa) that end up closer
+    to the morphed skin than ``keep_depth`` of their template depth are pushed back inward
+    along the skin normal, and the field is solved again with both the skin and the
+    corrected inner surface as Dirichlet data. Returns dX, ids and the count pushed.
+    """
+    ids, S = outer_boundary(model)
+    X0, tets = model.rest_positions, model.tets
+    L = laplacian(X0, tets).tocsr()
+    dX = _harmonic(L, ids, S @ surface_displacement)
+    faces, _ = boundary_faces(tets)
+    inner = np.setdiff1d(np.unique(faces), ids)
+    skin1 = model.neutral + surface_displacement
+    d0, _ = _depth(X0[inner], model.neutral, model.triangles)
+    X1 = X0 + dX
+    d1, n1 = _depth(X1[inner], skin1, model.triangles)
+    want = keep_depth * np.maximum(d0, 0)
+    low = d1 < want
+    if low.any():
+        X1[inner[low]] -= (want[low] - d1[low])[:, None] * n1[low]
+        fixed = np.concatenate([ids, inner])
+        dX = _harmonic(L, fixed, (X1 - X0)[fixed])
+    return dX, ids, int(low.sum())
+
+
+def _bad_tets(X, tets, min_radius_ratio):
+    return (signed_volumes(X, tets) <= 0) | (radius_ratio(X, tets) < min_radius_ratio)
+
+
+def relax_tets(X, tets, held, min_radius_ratio, rounds=20, rings=1):
+    """Smooth the non-held vertices around bad tets (inverted or below the radius-ratio bound)
+    by uniform Laplacian (zero-length edge springs) solves holding everything else; after
+    half the rounds, held vertices of tets still bad are released as well.
+    Returns X (N,3), vertices moved (int), rounds run (int)."""
+    N = len(X)
+    e = np.concatenate([tets[:, [a, b]] for a in range(4) for b in range(a + 1, 4)])
+    W = sp.coo_matrix((np.ones(2 * len(e)), (np.concatenate([e[:, 0], e[:, 1]]),
+                                             np.concatenate([e[:, 1], e[:, 0]]))), shape=(N, N)).tocsr()
+    W.data[:] = 1.0
+    Lu = (sp.diags(np.asarray(W.sum(1)).ravel()) - W).tocsr()
+    moved = np.zeros(N, bool)
+    X = X.copy()
+    for r in range(rounds):
+        bad = _bad_tets(X, tets, min_radius_ratio)
+        if not bad.any():
+            return X, int(moved.sum()), r
+        region = np.zeros(N, bool)
+        region[np.unique(tets[bad])] = True
+        for _ in range(rings + r // 4):
+            region[np.unique(tets[region[tets].any(1)])] = True
+        if r >= rounds // 2:          # last resort: release the skin vertices of bad tets too
+            held = held.copy()
+            held[np.unique(tets[bad])] = False
+        free = np.flatnonzero(region & ~held)
+        if len(free) == 0:
+            break
+        fixed = np.setdiff1d(np.arange(N), free)
+        X[free] = splu(Lu[free][:, free].tocsc()).solve(-(Lu[free][:, fixed] @ X[fixed]))
+        moved[free] = True
+    return X, int(moved.sum()), rounds
+
+
+def carry_points(X0, X1, tets, points):
+    """Points (P,3) in the rest mesh X0 moved by the piecewise-linear map X0 -> X1 of the tet
+    they lie in (or the best nearby one, extrapolated)."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    t, w = locate(X0, tets, points)
+    return np.einsum("pk,pkj->pj", w, X1[tets[t]])
+
+
+def carry_fibers(X0, X1, tets, tet_ids, fibers):
+    """Unit fibres (n,3) of tets ``tet_ids`` pushed forward by each tet's deformation gradient."""
+    g, _ = shape_gradients(X0, tets[tet_ids])
+    Fd = np.einsum("tai,taj->tij", X1[tets[tet_ids]], g)          # F = sum_a x_a grad(N_a)^T
+    f = np.einsum("tij,tj->ti", Fd, fibers)
+    return f / np.linalg.norm(f, axis=1, keepdims=True)
+
+
+def morph_volume(model, surface_displacement, min_radius_ratio, progress=None):
+    """Morph the flesh of ``model`` by the skin displacement (V,3). Raises MeshError when tets
+    stay inverted after relaxation."""
+    say = progress or (lambda m: None)
+    dX, ids, pushed = volume_displacement(model, surface_displacement)
+    if pushed:
+        say(f"collision processing: {pushed} inner-surface vertices pushed back under the skin")
+    X = model.rest_positions + dX
+    held = np.zeros(len(X), bool)
+    held[ids] = True
+    n_bad = int(_bad_tets(X, model.tets, min_radius_ratio).sum())
+    moved, rounds = 0, 0
+    if n_bad:
+        say(f"relaxing {n_bad} inverted or low-quality tets")
+        X, moved, rounds = relax_tets(X, model.tets, held, min_radius_ratio)
+    vol = signed_volumes(X, model.tets)
+    if (vol <= 0).any():
+        raise MeshError(f"the morphed flesh has {int((vol <= 0).sum())} inverted tets after relaxation: "
+                        "the target is too far from the template's proportions (check the landmarks "
+                        "in the --preview sheet)")
+    return VolumeMorph(X, X - model.rest_positions, ids, pushed, moved, rounds)
+
+
+def inside_fraction(X, tets, points, tol=-0.05):
+    """Fraction of points (P,3) inside the tet mesh (smallest barycentric weight >= tol)."""
+    t, _ = locate(X, tets, points)
+    w = barycentric(X, tets, t, points)
+    return float((w.min(1) >= tol).mean())

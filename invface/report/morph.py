@@ -1,0 +1,58 @@
+"""Preview sheet of a morphed model (build-model --neutral ... --preview DIR).
+
+Row 1: the aligned target with its landmarks (red) and feature curves (blue), front and 3/4.
+Row 2: the template with its landmarks and curves, the same views.
+Row 3: the morphed skin; row 4: skin with the morphed muscles; row 5: the morphed bones.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..render.preview import look_at_camera, render_meshes, to_srgb8
+from .preview import SKIN, VIEWS, scenes
+
+GREY = (0.72, 0.72, 0.72)
+
+
+def _dots(points, radius, color):
+    import trimesh
+    s = trimesh.creation.icosphere(1, radius=radius)
+    P = np.asarray(points).reshape(-1, 3)
+    V = (s.vertices[None] + P[:, None]).reshape(-1, 3)
+    F = (s.faces[None] + len(s.vertices) * np.arange(len(P))[:, None, None]).reshape(-1, 3)
+    return V, F, color
+
+
+def _marked(V, F, landmarks, curves, color):
+    meshes = [(V, F, color), _dots(list(landmarks.values()), 0.0022, (0.9, 0.1, 0.1))]
+    meshes.append(_dots(np.concatenate(list(curves.values())), 0.0008, (0.1, 0.3, 0.95)))
+    return meshes
+
+
+def write_morph_preview(model, result, folder, template=None, size=420, spp=12):
+    """Write the morph contact sheet ``morph_sheet.png`` (and its panels) into ``folder``."""
+    import matplotlib.pyplot as plt
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    sc = scenes(model)
+    rows = {"target": _marked(result.aligned, result.target.faces, result.landmarks, result.curves, GREY)}
+    if template is not None:
+        rows["template"] = _marked(template.neutral, template.triangles, result.template_landmarks,
+                                   result.template_curves, SKIN)
+    rows.update({"morphed_skin": sc["skin"], "muscles": sc["skin_muscles"], "bone": sc["bone"]})
+    images = []
+    for name, meshes in rows.items():
+        row = []
+        for view, eye in VIEWS.items():
+            cam = look_at_camera(np.array(eye), (0.0, 0.02, 0.04), fov=30, width=size, height=size, spp=spp)
+            row.append(to_srgb8(render_meshes(meshes, cam)))
+        images.append(np.concatenate(row, 1))
+    sheet = folder / "morph_sheet.png"
+    tmp = folder / "morph_sheet.tmp.png"
+    plt.imsave(tmp, np.concatenate(images, 0))
+    os.replace(tmp, sheet)
+    return sheet
