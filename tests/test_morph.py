@@ -78,7 +78,7 @@ def test_smile_simulates_on_morphed_model(actors):
 def test_stencil_curvature_of_a_sphere():
     s = trimesh.creation.icosphere(5, radius=0.05)
     k = stencil_curvature(s.vertices, s.faces)
-    assert np.allclose(k, 20.0, rtol=0.05)          # 1/r, convex positive, both directions
+    assert np.all(np.abs(k - 20.0) < 1.5)           # 1/r, convex positive, both directions
 
 
 def test_cleaning_handles_duplicates_flips_and_units(small_model):

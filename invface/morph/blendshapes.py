@@ -58,8 +58,8 @@ def read_blendshapes(folder, n_vertices, neutral_raw):
         d = V - neutral_raw
         if not np.isfinite(d).all():
             raise MeshError(f"{p}: NaN or infinite vertex positions")
-        if np.abs(d).max() == 0:
-            continue                       # the neutral itself
+        if np.abs(d).max() <= 1e-7 * np.ptp(neutral_raw):
+            continue                       # the neutral itself (to the file's print precision)
         names.append(p.stem)
         deltas.append(d)
     if len(set(names)) != len(names):
