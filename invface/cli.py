@@ -241,29 +241,14 @@ def cmd_camera_calibrate(args):
     return 0
 
 
-def _read_scan(path):
-    """(vertices (S,3), faces (G,3)) of an OBJ/PLY scan, in metres."""
-    import numpy as np
-    import trimesh
-    path = Path(path)
-    if not path.is_file():
-        raise InvfaceError(f"{path}: scan file not found")
-    try:
-        mesh = trimesh.load(path, process=False, force="mesh")
-    except Exception as e:  # noqa: BLE001 - trimesh raises many kinds
-        raise InvfaceError(f"{path}: not a readable mesh ({e})") from None
-    if len(getattr(mesh, "vertices", [])) == 0 or len(getattr(mesh, "faces", [])) == 0:
-        raise InvfaceError(f"{path}: the file holds no triangle mesh")
-    return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
-
-
 def cmd_fit_scan(args):
     """Fit controls and pose to a 3D scan (Eq. 13); write fit.json and the fitted mesh."""
     from tqdm import tqdm
 
     from .fit.scan import fit_scan
+    from .mesh.meshfile import read_mesh
     model = _load_model(args.model, args.resolution)
-    V, F = _read_scan(args.scan)
+    V, F = read_mesh(args.scan)  # metres
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
     bar = tqdm(desc=f"fit {args.model_kind} model to scan", unit="it", leave=False)

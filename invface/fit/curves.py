@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import InvfaceError
 from ..jsonfile import read_object
+from ..mesh.sections import resample_even as resample
 from .dogleg import dogleg
 from .scan import control_bounds, posed_jacobian, posed_surface, regulariser
 
@@ -91,14 +92,6 @@ def closest_on_polyline(points, poly, normals=False):
     at_vertex = (tc[i, k] <= 0) | (tc[i, k] >= 1)
     nrm = np.where(at_vertex[:, None] & (dist > 1e-12), off / np.maximum(dist, 1e-30), nrm)
     return foot, nrm
-
-
-def resample(poly, n):
-    """n points equally spaced by arc length along a polyline (m, d)."""
-    seg = np.linalg.norm(np.diff(poly, axis=0), axis=1)
-    s = np.r_[0, np.cumsum(seg)]
-    u = np.linspace(0, s[-1], n)
-    return np.stack([np.interp(u, s, poly[:, k]) for k in range(poly.shape[1])], 1)
 
 
 def projection_jacobian(camera, xr):

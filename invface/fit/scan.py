@@ -121,10 +121,10 @@ class _Objective:
 def _closest(scan_vertices, scan_faces, points):
     """Closest points (N,3) on the scan and the scan face normals there (N,3)."""
     from ..mesh.closest import closest_points
+    from ..mesh.triangles import face_normals
     tri, bary, _ = closest_points(points, scan_vertices, scan_faces)
-    fv = scan_vertices[scan_faces[tri]]
-    q = np.einsum("nk,nkj->nj", bary, fv)
-    n = np.cross(fv[:, 1] - fv[:, 0], fv[:, 2] - fv[:, 0])
+    q = np.einsum("nk,nkj->nj", bary, scan_vertices[scan_faces[tri]])
+    n = face_normals(scan_vertices, scan_faces[tri])
     return q, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30), tri
 
 

@@ -18,11 +18,9 @@ def unique_edges(F):
 
 @dataclass
 class Section:
-    """One connected chain of a plane section: points (n,3), the mesh edge each point lies
-    on (n,2 vertex ids) and its position t along that edge (n,), closed or open."""
+    """One connected chain of a plane section: points (n,3) (a closed loop repeats its first
+    point at the end)."""
     points: np.ndarray
-    edges: np.ndarray
-    t: np.ndarray
     closed: bool
 
     @property
@@ -36,9 +34,15 @@ def arc_length(P):
 
 
 def resample(P, s_new, s=None):
-    """Points of polyline P (n,3) at arc lengths s_new (m,) (s: P's own arc lengths)."""
+    """Points of polyline P (n,d) at arc lengths s_new (m,) (s: P's own arc lengths)."""
     s = arc_length(P) if s is None else s
     return np.stack([np.interp(s_new, s, P[:, k]) for k in range(P.shape[1])], 1)
+
+
+def resample_even(P, n):
+    """n points equally spaced by arc length along polyline P (m,d), both ends kept."""
+    s = arc_length(P)
+    return resample(P, np.linspace(0, s[-1], n), s)
 
 
 def plane_sections(V, F, origin, normal):
@@ -89,7 +93,7 @@ def plane_sections(V, F, origin, normal):
         if closed:
             chain.append(chain[0])
         c = np.array(chain)
-        chains.append(Section(pts[c], e[c], t[c], closed))
+        chains.append(Section(pts[c], closed))
     chains.sort(key=lambda c: -c.length)
     return chains
 

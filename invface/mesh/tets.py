@@ -118,6 +118,16 @@ def laplacian(X, tets):
     return sp.csr_matrix((K.ravel(), (rows, cols)), shape=(n, n))
 
 
+def graph_laplacian(edges, n):
+    """Uniform-weight graph Laplacian (n,n) of undirected edges (E,2) (repeats count once):
+    degree on the diagonal, -1 per neighbour; the stiffness of zero-length unit springs."""
+    e = np.asarray(edges)
+    W = sp.coo_matrix((np.ones(2 * len(e)), (np.concatenate([e[:, 0], e[:, 1]]),
+                                             np.concatenate([e[:, 1], e[:, 0]]))), shape=(n, n)).tocsr()
+    W.data[:] = 1.0
+    return (sp.diags(np.asarray(W.sum(1)).ravel()) - W).tocsr()
+
+
 def harmonic(L, fixed, values):
     """Solve L u = 0 with u[fixed] = values (Dirichlet), natural (Neumann) elsewhere.
 

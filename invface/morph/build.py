@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import ConfigError, MeshError
 from ..mesh.closest import closest_points
+from ..mesh.meshfile import read_mesh
 from ..mesh.tets import locate, quality_summary
 from ..model.facemodel import FaceModel
 from .blendshapes import read_blendshapes, recognised
@@ -29,7 +30,7 @@ from .curves import curve_set
 from .landmarks import find_landmarks, template_landmarks
 from .orient import align_to_template
 from .surface import SurfacePoisson, morph_surface
-from .target import Target, clean, load_target
+from .target import Target, clean
 from .volume import carry_fibers, carry_points, inside_fraction, morph_volume
 
 EXPRESSIONS = ("simulate", "copy", "none")
@@ -87,12 +88,12 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
         template = build_template()
     if isinstance(neutral, (str, Path)):
         say(f"reading {neutral}")
-        target = load_target(neutral, unit)
-        from .target import read_mesh
-        raw_V, _ = read_mesh(neutral)
+        raw_V, raw_F = read_mesh(neutral)
+        name = str(neutral)
     else:
         raw_V, raw_F = (np.asarray(a) for a in neutral)
-        target = clean(raw_V, raw_F, unit=unit)
+        name = "target"
+    target = clean(raw_V, raw_F, name=name, unit=unit)
     lap("clean")
     say(f"target: {len(target.vertices)} vertices, unit {target.unit}" +
         (f" ({'; '.join(target.notes)})" if target.notes else ""))
@@ -164,7 +165,6 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     elif expressions == "simulate":
         from ..template.expressions import calibrate_activation_curves, simulate_blendshapes
         simulate_blendshapes(model, progress=say)
-        model.blendshape_names = list(model.blendshape_names)
     lap("blendshapes")
     if len(model.blendshape_names):
         say("muscle-track precompute (paper 000 Eq. 10-11)")

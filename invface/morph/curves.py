@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh.closest import closest_points
-from ..mesh.sections import arc_length, plane_sections, resample
+from ..mesh.sections import arc_length, plane_sections, resample_even
 from ..mesh.triangles import vertex_normals
 
 # (from, to): the correspondence curves
@@ -63,8 +63,7 @@ def landmark_curve(V, F, a, b, normals_at=None):
             else:
                 piece = P[ia:ib + 1] if ia <= ib else P[ib:ia + 1][::-1]
             piece = np.concatenate([[a], piece, [b]])
-            s = arc_length(piece)
-            return resample(piece, np.linspace(0, s[-1], SAMPLES), s)
+            return resample_even(piece, SAMPLES)
     t = np.linspace(0, 1, SAMPLES)[:, None]
     return _project(V, F, a + t * (b - a))
 

@@ -24,11 +24,11 @@ patch finds the same anatomical point on both meshes.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..errors import MeshError
 from ..mesh.closest import closest_points
-from ..mesh.sections import arc_length, plane_sections
+from ..mesh.sections import plane_sections
+from ..template.features import profile_concavity
 from .curvature import feature_strength
 from .orient import rigid_icp
 
@@ -67,21 +67,6 @@ def profile_curve(V, F, prior_tip, depth=0.16):
         raise MeshError("the symmetry plane does not cut the front of the aligned target")
     parts.sort(key=lambda Q: Q[:, 1].mean())
     return np.concatenate(parts)
-
-
-def _concavity(P, ids, h=0.002):
-    s = arc_length(P[:, 1:])
-    out = []
-    for i in ids:
-        a = P[np.argmin(np.abs(s - (s[i] - h))), 1:]
-        b = P[np.argmin(np.abs(s - (s[i] + h))), 1:]
-        u, v = P[i, 1:] - a, b - P[i, 1:]
-        out.append(u[0] * v[1] - u[1] * v[0])
-    return np.array(out)
-
-
-def _closest_vertex(V, points):
-    return cKDTree(V).query(points)[1]
 
 
 _PATCHES = {}
@@ -143,7 +128,7 @@ def find_landmarks(V, F, model):
     stom = idx[mouth][np.argmin(z[mouth])]
     L["stomion"] = P[stom]
     between = (idx < tip) & (idx > stom) & (y > P[stom, 1] + 0.006) & window(prior["subnasale"], 0.01)
-    sub = idx[between][np.argmax(_concavity(P, idx[between]))] if between.any() else tip
+    sub = idx[between][np.argmax(profile_concavity(P, idx[between]))] if between.any() else tip
     L["subnasale"] = P[sub]
     up = (idx > stom) & (idx < sub)
     L["lip_upper"] = P[idx[up][np.argmax(z[up])]] if up.any() else P[stom]

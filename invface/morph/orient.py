@@ -26,7 +26,8 @@ from scipy.optimize import minimize
 
 from ..errors import MeshError
 from ..mesh.closest import closest_points
-from ..mesh.sections import arc_length, plane_sections
+from ..mesh.sections import arc_length, plane_sections, resample
+from ..mesh.triangles import triangle_areas
 
 NOSE_ARC = 0.015         # m along the profile either side of a nose-tip candidate
 MAX_NOSE_ANGLE_DEG = 135
@@ -43,16 +44,12 @@ class Frame:
     symmetry_error: float
     profile: np.ndarray
 
-    def to_frame(self, P):
-        """Target points (n,3) -> frame coordinates (origin at ``origin``)."""
-        return (np.asarray(P) - self.origin) @ self.R.T
-
 
 def shell_inertia(V, F):
     """Centre of mass (3,) and inertia tensor (3,3) of the surface as a thin shell of unit
     areal density (triangle masses at their centroids plus their own second moments)."""
     tri = V[F]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    area = triangle_areas(V, F)
     c = np.average(tri.mean(1), axis=0, weights=area)
     r = tri - c
     # second moment of a triangle with uniform density: A/12 (sum r_i r_i^T + (sum r_i)(sum r_i)^T)
@@ -84,10 +81,6 @@ def _profile(V, F, origin, normal, near=None):
     return chains[int(np.argmin(d))].points
 
 
-def _at(P, s, t):
-    return np.array([np.interp(t, s, P[:, k]) for k in range(3)])
-
-
 def _nose_scores(P, c):
     """Nose-tip candidates on profile P (n,3): list of (id, angle (rad)).
 
@@ -105,8 +98,8 @@ def _nose_scores(P, c):
         win = np.abs(s - s[i]) <= 0.005
         if r[i] < r[win].max():
             continue
-        u = [(_at(P, s, s[i] + sg * NOSE_ARC) - P[i]) for sg in (-1, 1)]
-        u = [v / np.linalg.norm(v) for v in u]
+        u = resample(P, s[i] + np.array([-NOSE_ARC, NOSE_ARC]), s) - P[i]
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
         bis = -(u[0] + u[1])
         if np.linalg.norm(bis) < 1e-9 or bis @ (P[i] - c) <= 0:
             continue

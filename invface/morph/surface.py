@@ -26,10 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
+from scipy.spatial import cKDTree
 
 from ..mesh.closest import closest_points
 from ..mesh.sections import point_to_polyline, unique_edges
-from ..mesh.triangles import vertex_normals
+from ..mesh.tets import graph_laplacian, harmonic
+from ..mesh.triangles import face_normals, triangle_areas, vertex_normals
 
 SNAP_DISTANCE = 0.01          # m: farther template vertices are "off the scan" (sec. 8.1)
 
@@ -50,7 +52,7 @@ def fv_laplacian(V, F):
     i, j = edges[:, 0], edges[:, 1]
     A = sp.coo_matrix((np.concatenate([-w, -w, w, w]), (np.concatenate([i, j, i, j]),
                                                         np.concatenate([j, i, i, j]))), shape=(n, n)).tocsr()
-    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    area = triangle_areas(V, F)
     ctrl = np.zeros(n)
     for k in range(3):
         np.add.at(ctrl, F[:, k], area / 3)
@@ -62,7 +64,7 @@ class SurfacePoisson:
     per Dirichlet set (the paper: everything but the values is precomputed)."""
 
     def __init__(self, V, F):
-        self.A, self.area = fv_laplacian(V, F)
+        self.A, _ = fv_laplacian(V, F)
         self._cache = {}
 
     def solve(self, fixed, values):
@@ -88,7 +90,6 @@ def curve_dirichlet(V, curves_t, curves_g, tol):
     """
     acc = np.zeros((len(V), 3))
     cnt = np.zeros(len(V))
-    from scipy.spatial import cKDTree
     tree = cKDTree(V)
     for key, Ct in curves_t.items():
         Cg = curves_g[key]
@@ -144,13 +145,13 @@ def snap(Vm, Ft, Vg, Fg, max_distance=SNAP_DISTANCE):
 def inverted_triangles(Vs, Ft, Vg, Fg):
     """Boolean (f,) of snapped template triangles whose normal opposes the target's normal
     at their centroid (the paper's level-set normal test)."""
-    fn = np.cross(Vs[Ft[:, 1]] - Vs[Ft[:, 0]], Vs[Ft[:, 2]] - Vs[Ft[:, 0]])
+    fn = face_normals(Vs, Ft)
     tri, w, _ = closest_points(Vs[Ft].mean(1), Vg, Fg)
     gn = np.einsum("nk,nkj->nj", w, vertex_normals(Vg, Fg)[Fg[tri]])
     return np.einsum("ij,ij->i", fn, gn) < 0
 
 
-def relax_region(Vs, Ft, bad_tris, rings=2, iters=1):
+def relax_region(Vs, Ft, bad_tris, rings=2):
     """Relax the vertices around ``bad_tris`` with zero-length springs (a uniform-weight
     harmonic solve) holding the region's boundary; returns new positions (n,3) and the
     region mask (n,)."""
@@ -160,20 +161,14 @@ def relax_region(Vs, Ft, bad_tris, rings=2, iters=1):
     for _ in range(rings):
         grow = region[Ft].any(1)
         region[np.unique(Ft[grow])] = True
-    edges, _ = unique_edges(Ft)
-    W = sp.coo_matrix((np.ones(2 * len(edges)), (np.concatenate([edges[:, 0], edges[:, 1]]),
-                                                 np.concatenate([edges[:, 1], edges[:, 0]]))), shape=(n, n)).tocsr()
-    Lu = sp.diags(np.asarray(W.sum(1)).ravel()) - W
+    Lu = graph_laplacian(unique_edges(Ft)[0], n)
     # the region's outer ring is held: free = region minus vertices touching the outside
-    outside = ~region
-    touching = np.asarray((W @ outside.astype(float)) > 0).ravel()
+    touching = np.asarray(Lu @ (~region).astype(float)).ravel() < 0
     free = np.flatnonzero(region & ~touching)
     if len(free) == 0:
         return Vs.copy(), region
     fixed = np.setdiff1d(np.arange(n), free)
-    out = Vs.copy()
-    out[free] = splu(Lu[free][:, free].tocsc()).solve(-(Lu[free][:, fixed] @ Vs[fixed]))
-    return out, region
+    return harmonic(Lu, fixed, Vs[fixed]), region
 
 
 @dataclass

@@ -8,11 +8,10 @@ works on open surfaces. The unit is found from the size: a head or face is 0.12-
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
-
 import numpy as np
 
 from ..errors import MeshError
+from ..mesh.triangles import face_normals, triangle_areas
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 HEAD_SIZE_M = (0.12, 0.6)        # bounding-box diagonal of a face or head, metres
@@ -34,24 +33,6 @@ class Target:
     source_ids: np.ndarray
     name: str = "target"
     notes: list = field(default_factory=list)
-
-
-def read_mesh(path):
-    """(vertices (n,3), faces (f,3)) of an OBJ/PLY file, unprocessed; clear errors."""
-    import trimesh
-
-    path = Path(path)
-    if not path.is_file():
-        raise MeshError(f"{path}: mesh file not found")
-    try:
-        mesh = trimesh.load(path, process=False, force="mesh")
-    except Exception as e:  # noqa: BLE001 - trimesh raises many kinds
-        raise MeshError(f"{path}: not a readable mesh ({e})") from None
-    V = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), float)
-    F = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), np.int64)
-    if len(V) == 0 or len(F) == 0:
-        raise MeshError(f"{path}: the file holds no triangle mesh")
-    return V, F
 
 
 def detect_unit(V, name="target"):
@@ -99,7 +80,7 @@ def clean(V, F, name="target", unit=None):
     src = first
     V, F = V[first], inv.ravel()[F]
     # degenerate, collapsed and repeated triangles
-    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    area = triangle_areas(V, F)
     bad = (area < MIN_AREA_M2) | (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
     _, uniq = np.unique(np.sort(F, axis=1), axis=0, return_index=True)
     rep = np.ones(len(F), bool)
@@ -125,15 +106,9 @@ def clean(V, F, name="target", unit=None):
     if (F != flipped_before).any():
         notes.append(f"made the winding consistent ({int((F != flipped_before).any(1).sum())} triangles flipped)")
     # normals out of the head: area-weighted normals point away from the centroid
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    fn = face_normals(V, F)
     c = V[F].mean(1)
     if np.einsum("ij,ij->", fn, c - np.average(c, axis=0, weights=np.linalg.norm(fn, axis=1))) < 0:
         F = F[:, [0, 2, 1]]
         notes.append("flipped all normals to point out of the head")
     return Target(V, F, unit, scale, src, name, notes)
-
-
-def load_target(path, unit=None):
-    """Read and clean a neutral scan (OBJ/PLY) into a Target in metres."""
-    V, F = read_mesh(path)
-    return clean(V, F, name=str(path), unit=unit)

@@ -21,13 +21,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import splu
 
 from ..errors import MeshError
 from ..mesh.closest import closest_points
-from ..mesh.tets import (barycentric, boundary_faces, laplacian, locate, radius_ratio, shape_gradients,
-                         signed_volumes)
+from ..mesh.tets import (barycentric, boundary_faces, graph_laplacian, harmonic, laplacian, locate,
+                         radius_ratio, shape_gradients, signed_volumes)
 from ..mesh.triangles import vertex_normals
 from ..sim.poisson import outer_boundary
 
@@ -36,24 +34,12 @@ MIN_DEPTH_FRACTION = 0.7     # inner surfaces keep at least this much of the tem
 
 @dataclass
 class VolumeMorph:
-    """Morphed rest positions X (N,3), the displacement field dX (N,3), the skin-boundary tet
-    vertex ids (B,), inner-surface vertices pushed back by collision processing, and
-    relaxation statistics."""
+    """Morphed rest positions X (N,3), the count of inner-surface vertices pushed back by
+    collision processing, and relaxation statistics."""
     X: np.ndarray
-    dX: np.ndarray
-    boundary: np.ndarray
     pushed: int
     relaxed_vertices: int
     relax_rounds: int
-
-
-def _harmonic(L, fixed, values):
-    N = L.shape[0]
-    free = np.setdiff1d(np.arange(N), fixed)
-    out = np.zeros((N, 3))
-    out[fixed] = values
-    out[free] = splu(L[free][:, free].tocsc()).solve(-(L[free][:, fixed] @ values))
-    return out
 
 
 def _depth(points, V, F):
@@ -76,7 +62,7 @@ def volume_displacement(model, surface_displacement, keep_depth=MIN_DEPTH_FRACTI
     ids, S = outer_boundary(model)
     X0, tets = model.rest_positions, model.tets
     L = laplacian(X0, tets).tocsr()
-    dX = _harmonic(L, ids, S @ surface_displacement)
+    dX = harmonic(L, ids, S @ surface_displacement)
     faces, _ = boundary_faces(tets)
     inner = np.setdiff1d(np.unique(faces), ids)
     skin1 = model.neutral + surface_displacement
@@ -88,7 +74,7 @@ def volume_displacement(model, surface_displacement, keep_depth=MIN_DEPTH_FRACTI
     if low.any():
         X1[inner[low]] -= (want[low] - d1[low])[:, None] * n1[low]
         fixed = np.concatenate([ids, inner])
-        dX = _harmonic(L, fixed, (X1 - X0)[fixed])
+        dX = harmonic(L, fixed, (X1 - X0)[fixed])
     return dX, ids, int(low.sum())
 
 
@@ -102,11 +88,7 @@ def relax_tets(X, tets, held, min_radius_ratio, rounds=20, rings=1):
     half the rounds, held vertices of tets still bad are released as well.
     Returns X (N,3), vertices moved (int), rounds run (int)."""
     N = len(X)
-    e = np.concatenate([tets[:, [a, b]] for a in range(4) for b in range(a + 1, 4)])
-    W = sp.coo_matrix((np.ones(2 * len(e)), (np.concatenate([e[:, 0], e[:, 1]]),
-                                             np.concatenate([e[:, 1], e[:, 0]]))), shape=(N, N)).tocsr()
-    W.data[:] = 1.0
-    Lu = (sp.diags(np.asarray(W.sum(1)).ravel()) - W).tocsr()
+    Lu = graph_laplacian(np.concatenate([tets[:, [a, b]] for a in range(4) for b in range(a + 1, 4)]), N)
     moved = np.zeros(N, bool)
     X = X.copy()
     for r in range(rounds):
@@ -124,7 +106,7 @@ def relax_tets(X, tets, held, min_radius_ratio, rounds=20, rings=1):
         if len(free) == 0:
             break
         fixed = np.setdiff1d(np.arange(N), free)
-        X[free] = splu(Lu[free][:, free].tocsc()).solve(-(Lu[free][:, fixed] @ X[fixed]))
+        X = harmonic(Lu, fixed, X[fixed])
         moved[free] = True
     return X, int(moved.sum()), rounds
 
@@ -165,7 +147,7 @@ def morph_volume(model, surface_displacement, min_radius_ratio, progress=None):
         raise MeshError(f"the morphed flesh has {int((vol <= 0).sum())} inverted tets after relaxation: "
                         "the target is too far from the template's proportions (check the landmarks "
                         "in the --preview sheet)")
-    return VolumeMorph(X, X - model.rest_positions, ids, pushed, moved, rounds)
+    return VolumeMorph(X, pushed, moved, rounds)
 
 
 def inside_fraction(X, tets, points, tol=-0.05):

@@ -38,7 +38,7 @@ def _mirror_xy(xy):
     return [(-x, y) for x, y in xy]
 
 
-def _concavity(P, ids, h=0.002):
+def profile_concavity(P, ids, h=0.002):
     """Turning of the profile P (n,3) towards the head at points ids, over ~h metres either side."""
     s = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(P[:, 1:], axis=0), axis=1))])
     out = []
@@ -76,7 +76,7 @@ def find_features(fine, V):
     stom_y = V[L["stomion"], 1]
     # subnasale: the sharpest concave corner of the profile between the tip and the lip
     between = np.nonzero((np.arange(len(P)) < tip) & (P[:, 1] > stom_y + 0.006))[0]
-    L["subnasale"] = int(profile[between[np.argmax(_concavity(P, between))]])
+    L["subnasale"] = int(profile[between[np.argmax(profile_concavity(P, between))]])
     below = np.nonzero(P[:, 1] < stom_y - 0.012)[0]
     chin = below[np.argmax(P[below, 2] - P[below, 1])]                       # most down-forward point
     L["chin"] = int(profile[chin])
