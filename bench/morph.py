@@ -1,7 +1,8 @@
 """Model-builder benchmark (paper 001): seconds per stage of build_model for a ~50k-vertex
 target (the default template skin, subdivided once, deformed into a new identity, randomly
 rotated and written in millimetres), with the template's expressions re-simulated on the
-new anatomy.
+new anatomy. Also prints the round-trip accuracy: landmark errors against the template's
+landmarks carried by the known deformation, and the vertex correspondence error.
 
     python bench/morph.py [--expressions simulate|copy] [--seed 1]
 """
@@ -11,10 +12,13 @@ import argparse
 import json
 import time
 
+import numpy as np
 import trimesh
 
 import invface
+from invface.mesh.closest import closest_points
 from invface.morph.build import build_model
+from invface.morph.landmarks import template_landmarks
 from invface.morph.synthetic import random_identity, random_pose
 
 
@@ -34,6 +38,16 @@ def main():
     for k, v in res.seconds.items():
         print(f"  {k:12s} {v:7.1f} s")
     print(f"  {'total':12s} {total:7.1f} s")
+    # truth: the template's landmarks and vertices carried by the known deformation, model frame
+    A = model.scan_transform
+    truth = Y @ A[:3, :3].T + A[:3, 3]                     # subdivided skin, first len(tpl) = template
+    tl = template_landmarks(tpl)
+    tri, w, _ = closest_points(np.array(list(tl.values())), tpl.neutral, tpl.triangles)
+    known = np.einsum("nk,nkj->nj", w, truth[tpl.triangles[tri]])
+    err = {k: float(np.linalg.norm(res.landmarks[k] - p) * 1000) for k, p in zip(tl, known)}
+    print("landmark error (mm): " + ", ".join(f"{k} {v:.1f}" for k, v in err.items()))
+    corr = np.linalg.norm(model.neutral - truth[: len(tpl.neutral)], axis=1) * 1000
+    print(f"vertex correspondence error: mean {corr.mean():.2f} mm, median {np.median(corr):.2f} mm")
     st = res.stats
     print(json.dumps({"alignment_residual_mm": round(st["alignment_residual_mm"], 3),
                       "skin_to_target_mean_mm": round(st["surface_to_target_mm"]["mean"], 4),
