@@ -75,6 +75,41 @@ def test_smile_simulates_on_morphed_model(actors):
     assert np.isfinite(xs).all()
 
 
+def test_real_scan_ict_neutral(small_model):
+    """ICT-FaceKit's neutral (cm, with neck, ears, open eyes and parted lips; proportions
+    1-2 cm off the template's) builds a valid model with landmarks on its real features."""
+    from conftest import ICT
+    from invface.mesh.meshfile import read_mesh
+    from invface.mesh.tets import radius_ratio, signed_volumes
+    from invface.mesh.triangles import boundary_loops
+    if not (ICT / "neutral.obj").exists():
+        pytest.skip("ICT-FaceKit data (../shared/data/ict-facekit) is not available")
+    model, res = build_model(ICT / "neutral.obj", template=small_model, expressions="none")
+    assert (signed_volumes(model.rest_positions, model.tets) > 0).all()
+    assert radius_ratio(model.rest_positions, model.tets).min() >= 0.005
+    assert res.stats["centerlines_inside"] > 0.9
+    V, F = read_mesh(ICT / "neutral.obj")
+    A = model.scan_transform
+    V = V @ A[:3, :3].T + A[:3, 3]
+    L = res.landmarks
+    # the nose tip is the scan's most forward point near the midline
+    mid = np.abs(V[:, 0]) < 0.02
+    assert np.linalg.norm(L["nose_tip"] - V[mid][np.argmax(V[mid, 2])]) < 0.002
+    # eye and mouth corners at the ends of the scan's openings, the stomion between the lips
+    holes = [V[h] for h in boundary_loops(F) if len(h) < 200]
+    mouth = min(holes, key=lambda H: np.linalg.norm(H.mean(0) - L["stomion"]))
+    for side, k in (("L", np.argmax), ("R", np.argmin)):
+        assert np.linalg.norm(L[f"mouth_corner_{side}"] - mouth[k(mouth[:, 0])]) < 0.002
+        eye = min(holes, key=lambda H: np.linalg.norm(H.mean(0) - L[f"eye_outer_{side}"]))
+        assert np.linalg.norm(L[f"eye_outer_{side}"] - eye[np.argmax(np.abs(eye[:, 0]))]) < 0.002
+        assert np.linalg.norm(L[f"eye_inner_{side}"] - eye[np.argmin(np.abs(eye[:, 0]))]) < 0.002
+    assert mouth[:, 1].min() <= L["stomion"][1] <= mouth[:, 1].max()
+    # the chin on the face (3-6 cm below the mouth), not at the base of the scan's neck
+    assert 0.03 < L["stomion"][1] - L["chin"][1] < 0.06
+    # the head's width measured on the skull, not across the ears (ears reach |x| > 8.5 cm)
+    assert abs(L["head_extreme_L"][0]) < 0.085 and abs(L["head_extreme_R"][0]) < 0.085
+
+
 def test_stencil_curvature_of_a_sphere():
     s = trimesh.creation.icosphere(5, radius=0.05)
     k = stencil_curvature(s.vertices, s.faces)

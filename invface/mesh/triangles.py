@@ -25,3 +25,23 @@ def vertex_normals(X, faces, n_vertices=None):
     for k in range(3):
         np.add.at(vn, faces[:, k], fn)
     return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
+
+
+def boundary_loops(faces):
+    """Open boundaries of a triangle mesh: a list of vertex-id arrays, one per connected
+    component of the edges used by a single triangle (holes such as open eyes or mouth)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    F = np.asarray(faces, np.int64)
+    e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    u, c = np.unique(e, axis=0, return_counts=True)
+    b = u[c == 1]
+    if len(b) == 0:
+        return []
+    ids, local = np.unique(b, return_inverse=True)
+    local = local.reshape(-1, 2)
+    n = len(ids)
+    g = coo_matrix((np.ones(len(local)), (local[:, 0], local[:, 1])), shape=(n, n))
+    k, lab = connected_components(g, directed=False)
+    return [ids[lab == i] for i in range(k)]

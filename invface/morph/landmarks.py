@@ -1,15 +1,19 @@
 """The 17 landmarks of paper 001 (sec. 6, Fig. 6) on a target aligned to the template.
 
 The target is already in the model frame (orient.align_to_template): +Y up, +Z forward. Each
-landmark starts from a prior, the template's landmark carried to the target's closest point,
-and is then found by the paper's rule for it:
+landmark starts from a prior, the template's landmark carried by a similarity fit of the
+template's face (face_similarity) to the target's closest point, and is then found by the paper's rule for it:
 
 - on the profile curve (mesh ∩ symmetry plane): the nose tip (most forward point), the nose
   bridge (the deepest point above the tip), the subnasale (the sharpest concave corner
   between tip and mouth), the upper and lower lip (most forward points either side of the
-  stomion), the chin (the most down-and-forward point below the mouth), the neck start
+  stomion), the chin (the first down-and-forward extreme below the nose), the neck start
   (2 cm below the chin) and the top of the head (the highest point);
 - the left/right extreme points of the head above the chin;
+- priors for the bridge, stomion, subnasale, mouth corners and alar points are the template's
+  moved by the offsets already found at the nose tip, bridge, stomion and chin, interpolated
+  by height (a real face's proportions differ from the template's by 1-2 cm: on ICT-FaceKit's
+  neutral the similarity-carried template eyes sit 17 mm too low);
 - eye corners, mouth corners and alar points by curvature-weighted local registration: the
   template's skin within 15 mm of the landmark, each vertex weighted by its fixed-stencil
   feature strength (sec. 6: curvature is what marks these features), is rigidly registered
@@ -24,10 +28,12 @@ patch finds the same anatomical point on both meshes.
 from __future__ import annotations
 
 import numpy as np
+from scipy.signal import find_peaks
 
 from ..errors import MeshError
 from ..mesh.closest import closest_points
 from ..mesh.sections import plane_sections
+from ..mesh.triangles import boundary_loops
 from ..template.features import profile_concavity
 from .curvature import feature_strength
 from .orient import rigid_icp
@@ -36,6 +42,7 @@ LANDMARKS = ("nose_tip", "nose_bridge", "subnasale", "top_of_head", "chin", "nec
              "head_extreme_L", "head_extreme_R", "eye_inner_L", "eye_outer_L", "eye_inner_R",
              "eye_outer_R", "mouth_corner_L", "mouth_corner_R", "lip_upper", "lip_lower",
              "alar_L", "alar_R", "stomion")
+EAR_CURVATURE = 140.0     # 1/m: paper 001 sec. 9.1, sum of absolute curvatures on the ears
 PATCH_RADIUS = 0.015      # m: template skin registered around eye/mouth corners and alar points
 
 
@@ -83,20 +90,88 @@ def _template_patch(model, vid, radius=PATCH_RADIUS):
     return _PATCHES[key]
 
 
-def _register_patch(model, vid, V, F):
+def face_similarity(model, V, F, radius=0.09, n=2000):
+    """Similarity (A (3,3) = scale x rotation, t (3,)) of the template's face (skin within
+    ``radius`` of its nose tip) onto the aligned target (V, F) by trimmed ICP. Real faces
+    differ from the template in size by centimetres; the landmark priors and the patch
+    registrations start from this map instead of the template's own positions."""
+    Vt = model.neutral
+    ids = np.flatnonzero(np.linalg.norm(Vt - Vt[model.landmarks["nose_tip"]], axis=1) < radius)
+    ids = ids[np.random.default_rng(3).permutation(len(ids))[:n]]
+    A, t, _ = rigid_icp(Vt[ids], V, F, np.eye(3), np.zeros(3), iters=40, scale=True)
+    return A, t
+
+
+def _register_patch(model, vid, V, F, A, t):
     """Template landmark vid carried onto the target (V, F; aligned) by curvature-weighted
-    rigid ICP of its surrounding template patch."""
+    rigid ICP of its surrounding template patch, starting from the similarity (A, t)."""
     P, w = _template_patch(model, vid)
-    R, t, _ = rigid_icp(P, V, F, np.eye(3), np.zeros(3), iters=30, weights=w)
+    R, t, _ = rigid_icp(P, V, F, A, t, iters=30, weights=w)
     q = R @ model.neutral[vid] + t
     tri, bw, _ = closest_points(q[None], V, F)
     return np.einsum("k,kj->j", bw[0], V[F[tri[0]]])
 
 
+def _opening(V, loops, center, radius):
+    """Vertex ids of the boundary loop (an opening of the scan) whose centroid lies within
+    ``radius`` of ``center`` (3,), the nearest one; None when there is none."""
+    best, dist = None, radius
+    for ids in loops:
+        d = np.linalg.norm(V[ids].mean(axis=0) - center)
+        if d < dist and len(ids) >= 6:
+            best, dist = ids, d
+    return best
+
+
+def _front_depth(P, ys, max_step=0.005):
+    """For each height ys (k,), the frontmost z where the profile polyline P (n,3) crosses
+    it (segments longer than ``max_step``, the joins between pieces, are skipped)."""
+    a, b = P[:-1], P[1:]
+    seg = np.linalg.norm(b - a, axis=1) < max_step
+    a, b = a[seg], b[seg]
+    lo, hi = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
+    dy = np.where(hi > lo, b[:, 1] - a[:, 1], 1.0)
+    s = np.clip((ys[:, None] - a[None, :, 1]) / dy[None], 0, 1)
+    zc = a[None, :, 2] + s * (b[None, :, 2] - a[None, :, 2])
+    inside = (ys[:, None] >= lo[None] - 1e-9) & (ys[:, None] <= hi[None] + 1e-9)
+    return np.where(inside, zc, -np.inf).max(axis=1)
+
+
+def _ears(V, F, ids, threshold=EAR_CURVATURE, grow=0.01):
+    """Mask over vertex ids (k,) of the ears: the paper's (sec. 9.1) sum of absolute
+    curvatures above ``threshold`` (1/m) on the outer third of the head's width, grown by
+    ``grow`` (m). The template has no ears; a scan's ears must not set the head's width."""
+    out = ids[np.abs(V[ids, 0]) > 0.66 * np.abs(V[ids, 0]).max()]
+    if len(out) == 0:
+        return np.zeros(len(ids), bool)
+    curved = out[feature_strength(V, F, out) > threshold]
+    if len(curved) == 0:
+        return np.zeros(len(ids), bool)
+    from scipy.spatial import cKDTree
+    d, _ = cKDTree(V[curved]).query(V[ids])
+    return d < grow
+
+
+def _chin(P, tip, drop=0.03, prominence=0.002):
+    """Index of the chin on the profile P (n,3, bottom to top): going down from the nose tip,
+    the first point (at least ``drop`` below the tip) that is a local maximum of z - y, the
+    support point in the down-and-forward direction (the gnathion, where the surface turns
+    from facing forward to facing down). A scan with a neck flares forward again at the
+    neck's base; taking the first maximum, not the global one, stops at the chin."""
+    down = np.arange(tip, -1, -1)
+    down = down[P[down, 1] < P[tip, 1] - drop]
+    if len(down) < 3:
+        raise MeshError("the profile ends below the nose: no chin found")
+    f = P[down, 2] - P[down, 1]
+    peaks, _ = find_peaks(f, prominence=prominence)
+    return int(down[peaks[0]] if len(peaks) else down[np.argmax(f)])
+
+
 def find_landmarks(V, F, model):
     """Landmarks {name: (3,) point in the model frame} and the profile polyline, on an aligned
     target (V (n,3) m in the model frame, F). Raises MeshError when a landmark cannot be placed."""
-    prior = {k: model.neutral[v] for k, v in model.landmarks.items() if k in LANDMARKS}
+    A, t = face_similarity(model, V, F)
+    prior = {k: A @ model.neutral[v] + t for k, v in model.landmarks.items() if k in LANDMARKS}
     # priors carried onto the target surface
     tri, w, _ = closest_points(np.array(list(prior.values())), V, F)
     prior = dict(zip(prior, np.einsum("nk,nkj->nj", w, V[F[tri]])))
@@ -108,35 +183,63 @@ def find_landmarks(V, F, model):
     def window(center, r):
         return np.linalg.norm(P - center, axis=1) < r
 
-    near_tip = window(prior["nose_tip"], 0.025)
+    def reanchor(name, a, b):
+        """prior[name] moved by the found-minus-prior offsets of landmarks a and b,
+        interpolated by height: real faces differ from the template's proportions."""
+        ya, yb = prior[a][1], prior[b][1]
+        r = 0.0 if a == b else float(np.clip((prior[name][1] - ya) / (yb - ya), 0, 1))
+        return prior[name] + (1 - r) * (L[a] - prior[a]) + r * (L[b] - prior[b])
+
+    near_tip = window(prior["nose_tip"], 0.03)
     if not near_tip.any():
         raise MeshError("the profile curve misses the nose: the alignment to the template failed")
     tip = idx[near_tip][np.argmax(z[near_tip])]
     L["nose_tip"] = P[tip]
-    above = (idx > tip) & window(prior["nose_bridge"], 0.015)
+    above = (idx > tip) & window(reanchor("nose_bridge", "nose_tip", "nose_tip"), 0.015)
     if not above.any():
         raise MeshError("no nose bridge above the nose tip on the profile")
     L["nose_bridge"] = P[idx[above][np.argmin(z[above])]]
-    for name in ("eye_inner_L", "eye_outer_L", "eye_inner_R", "eye_outer_R", "mouth_corner_L",
-                 "mouth_corner_R", "alar_L", "alar_R"):
-        L[name] = _register_patch(model, model.landmarks[name], V, F)
+    chin = _chin(P, tip)
+    L["chin"] = P[chin]
+    loops = boundary_loops(F)
+
+    def corners(inner, outer, a, b):
+        """Both corners of an eye or the mouth: the x-extremes of the scan's opening there
+        when it has one (open eyes, parted lips), else the registered template patches."""
+        p, q = reanchor(inner, a, b), reanchor(outer, a, b)
+        hole = _opening(V, loops, 0.5 * (p + q), 0.5 * np.linalg.norm(p - q) + 0.005)
+        if hole is not None:
+            # eye: inner/outer = nearest/farthest from the symmetry plane; mouth: left/right
+            ax = np.abs(V[hole, 0]) if p[0] * q[0] > 0 else V[hole, 0] * np.sign(q[0] - p[0])
+            L[inner], L[outer] = V[hole[np.argmin(ax)]], V[hole[np.argmax(ax)]]
+            return
+        for name, pt in ((inner, p), (outer, q)):
+            L[name] = _register_patch(model, model.landmarks[name], V, F, A, t + pt - prior[name])
+
+    corners("eye_inner_L", "eye_outer_L", "nose_bridge", "nose_bridge")
+    corners("eye_inner_R", "eye_outer_R", "nose_bridge", "nose_bridge")
+    stom_prior = reanchor("stomion", "nose_tip", "chin")
+    L["stomion"] = stom_prior
+    for name in ("alar_L", "alar_R"):
+        shift = reanchor(name, "nose_tip", "stomion") - prior[name]
+        L[name] = _register_patch(model, model.landmarks[name], V, F, A, t + shift)
+    corners("mouth_corner_L", "mouth_corner_R", "stomion", "stomion")
     # mouth: stomion at the corners' height, lips either side
     my = 0.5 * (L["mouth_corner_L"][1] + L["mouth_corner_R"][1])
-    mouth = (idx < tip) & (np.abs(y - my) < 0.006) & window(prior["stomion"], 0.008)
+    mouth = (idx < tip) & (idx > chin) & (np.abs(y - my) < 0.006)
     if not mouth.any():
         raise MeshError("no mouth found on the profile at the height of the mouth corners")
-    stom = idx[mouth][np.argmin(z[mouth])]
+    # the deepest notch of the profile seen from the front: each candidate's depth is the
+    # frontmost profile point at its height, so an open mouth's inner lips do not count
+    front = _front_depth(P[chin:tip + 1], y[mouth])
+    stom = idx[mouth][np.argmin(front)]
     L["stomion"] = P[stom]
-    between = (idx < tip) & (idx > stom) & (y > P[stom, 1] + 0.006) & window(prior["subnasale"], 0.01)
+    between = ((idx < tip) & (idx > stom) & (y > P[stom, 1] + 0.006)
+               & window(reanchor("subnasale", "nose_tip", "stomion"), 0.01))
     sub = idx[between][np.argmax(profile_concavity(P, idx[between]))] if between.any() else tip
     L["subnasale"] = P[sub]
     up = (idx > stom) & (idx < sub)
     L["lip_upper"] = P[idx[up][np.argmax(z[up])]] if up.any() else P[stom]
-    below = (idx < stom) & (y < P[stom, 1] - 0.012)
-    if not below.any():
-        raise MeshError("the profile ends at the mouth: no chin found")
-    chin = idx[below][np.argmax(z[below] - y[below])]
-    L["chin"] = P[chin]
     lo = (idx < stom) & (idx > chin)
     L["lip_lower"] = P[idx[lo][np.argmax(z[lo])]] if lo.any() else P[stom]
     neck = idx[(idx <= chin)]
@@ -146,6 +249,7 @@ def find_landmarks(V, F, model):
     if not band.any():
         raise MeshError("no head sides found above the chin")
     bid = np.flatnonzero(band)
+    bid = bid[~_ears(V, F, bid)]
     L["head_extreme_L"] = V[bid[np.argmax(V[bid, 0])]]
     L["head_extreme_R"] = V[bid[np.argmin(V[bid, 0])]]
     return {k: np.asarray(L[k], float) for k in LANDMARKS}, P

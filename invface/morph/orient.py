@@ -186,19 +186,23 @@ class Alignment:
         return np.asarray(P) @ self.R.T + self.t
 
 
-def _kabsch(A, B, w=None):
-    """Rotation R, translation t minimising sum w |R A + t - B|^2 (A, B (n,3), w (n,))."""
+def _kabsch(A, B, w=None, scale=False):
+    """Rotation R (times a uniform scale when ``scale``; Umeyama), translation t minimising
+    sum w |R A + t - B|^2 (A, B (n,3), w (n,))."""
     w = np.ones(len(A)) if w is None else w
     ca, cb = np.average(A, axis=0, weights=w), np.average(B, axis=0, weights=w)
-    U, _, Vt = np.linalg.svd((w[:, None] * (A - ca)).T @ (B - cb))
+    U, S, Vt = np.linalg.svd((w[:, None] * (A - ca)).T @ (B - cb))
     D = np.diag([1, 1, np.sign(np.linalg.det(Vt.T @ U.T))])
     R = Vt.T @ D @ U.T
+    if scale:
+        R *= (S * np.diag(D)).sum() / (w * ((A - ca) ** 2).sum(axis=1)).sum()
     return R, cb - R @ ca
 
 
-def rigid_icp(P, V, F, R, t, iters=20, trim=2.5, weights=None):
+def rigid_icp(P, V, F, R, t, iters=20, trim=2.5, weights=None, scale=False):
     """Trimmed point-to-surface rigid ICP of points P (n,3) onto the mesh (V, F), from R, t.
     Pairs farther than ``trim`` x the median distance are dropped; weights (n,) optional.
+    With ``scale`` R also carries a uniform scale (similarity ICP).
     Returns R, t, median distance (m)."""
     med = np.inf
     weights = np.ones(len(P)) if weights is None else weights
@@ -208,7 +212,7 @@ def rigid_icp(P, V, F, R, t, iters=20, trim=2.5, weights=None):
         med = float(np.median(d))
         keep = d <= trim * med + 1e-9
         C = np.einsum("nk,nkj->nj", w, V[F[tri]])
-        dR, dt = _kabsch(Q[keep], C[keep], weights[keep])
+        dR, dt = _kabsch(Q[keep], C[keep], weights[keep], scale)
         R, t = dR @ R, dR @ t + dt
         if np.linalg.norm(dR - np.eye(3)) < 1e-6 and np.linalg.norm(dt) < 1e-7:
             break

@@ -12,9 +12,11 @@ Where the skin moves inward by more than the tissue is thick, the inner surface 
 back first (collision processing, only the inner displacements change, then the field is
 solved again with both surfaces as Dirichlet data, as the paper does).
 Fibres follow the deformation gradient of their tet. Tets that invert or fall below the
-template's quality bound are relaxed (sec. 9: mass-spring relaxation of interior nodes,
-here a uniform-weight Laplacian smoothing of the non-skin vertices of the bad tets'
-neighbourhood), with the skin held.
+template's quality bound are relaxed (sec. 9: mass-spring relaxation of interior nodes or
+remeshing; here the non-skin vertices of the bad tets' neighbourhood minimise a regularised
+mean-ratio distortion against the template's own tets, mesh.untangle, which untangles
+inverted tets and restores the template's shape quality without remeshing), with the skin
+held until the last round.
 """
 from __future__ import annotations
 
@@ -24,9 +26,10 @@ import numpy as np
 
 from ..errors import MeshError
 from ..mesh.closest import closest_points
-from ..mesh.tets import (barycentric, boundary_faces, graph_laplacian, harmonic, laplacian, locate,
+from ..mesh.tets import (barycentric, boundary_faces, harmonic, laplacian, locate,
                          radius_ratio, shape_gradients, signed_volumes)
 from ..mesh.triangles import vertex_normals
+from ..mesh.untangle import untangle
 from ..sim.poisson import outer_boundary
 
 MIN_DEPTH_FRACTION = 0.7     # inner surfaces keep at least this much of the template's tissue depth
@@ -82,31 +85,27 @@ def _bad_tets(X, tets, min_radius_ratio):
     return (signed_volumes(X, tets) <= 0) | (radius_ratio(X, tets) < min_radius_ratio)
 
 
-def relax_tets(X, tets, held, min_radius_ratio, rounds=20, rings=1):
-    """Smooth the non-held vertices around bad tets (inverted or below the radius-ratio bound)
-    by uniform Laplacian (zero-length edge springs) solves holding everything else; after
-    half the rounds, held vertices of tets still bad are released as well.
+def relax_tets(X, X0, tets, held, min_radius_ratio, rounds=4, rings=2):
+    """Untangle and re-shape the tets around bad ones (inverted or below the radius-ratio
+    bound): the non-held vertices within ``rings`` (growing each round) of a bad tet minimise
+    the regularised mean-ratio distortion against the template's rest tets X0 (mesh.untangle);
+    in the last round the held (skin, bone) vertices of tets still bad are released as well.
     Returns X (N,3), vertices moved (int), rounds run (int)."""
     N = len(X)
-    Lu = graph_laplacian(np.concatenate([tets[:, [a, b]] for a in range(4) for b in range(a + 1, 4)]), N)
     moved = np.zeros(N, bool)
-    X = X.copy()
     for r in range(rounds):
         bad = _bad_tets(X, tets, min_radius_ratio)
         if not bad.any():
             return X, int(moved.sum()), r
         region = np.zeros(N, bool)
         region[np.unique(tets[bad])] = True
-        for _ in range(rings + r // 4):
+        for _ in range(rings + r):
             region[np.unique(tets[region[tets].any(1)])] = True
-        if r >= rounds // 2:          # last resort: release the skin vertices of bad tets too
+        if r == rounds - 1:           # last resort: release the skin/bone vertices of bad tets too
             held = held.copy()
             held[np.unique(tets[bad])] = False
         free = np.flatnonzero(region & ~held)
-        if len(free) == 0:
-            break
-        fixed = np.setdiff1d(np.arange(N), free)
-        X = harmonic(Lu, fixed, X[fixed])
+        X = untangle(X, X0, tets, free)
         moved[free] = True
     return X, int(moved.sum()), rounds
 
@@ -141,7 +140,7 @@ def morph_volume(model, surface_displacement, min_radius_ratio, progress=None):
     moved, rounds = 0, 0
     if n_bad:
         say(f"relaxing {n_bad} inverted or low-quality tets")
-        X, moved, rounds = relax_tets(X, model.tets, held, min_radius_ratio)
+        X, moved, rounds = relax_tets(X, model.rest_positions, model.tets, held, min_radius_ratio)
     vol = signed_volumes(X, model.tets)
     if (vol <= 0).any():
         raise MeshError(f"the morphed flesh has {int((vol <= 0).sum())} inverted tets after relaxation: "
