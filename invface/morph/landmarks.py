@@ -218,8 +218,7 @@ def find_landmarks(V, F, model):
 
     corners("eye_inner_L", "eye_outer_L", "nose_bridge", "nose_bridge")
     corners("eye_inner_R", "eye_outer_R", "nose_bridge", "nose_bridge")
-    stom_prior = reanchor("stomion", "nose_tip", "chin")
-    L["stomion"] = stom_prior
+    L["stomion"] = reanchor("stomion", "nose_tip", "chin")     # the prior; found below
     for name in ("alar_L", "alar_R"):
         shift = reanchor(name, "nose_tip", "stomion") - prior[name]
         L[name] = _register_patch(model, model.landmarks[name], V, F, A, t + shift)
