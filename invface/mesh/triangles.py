@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 
 def face_normals(X, faces):
@@ -27,16 +29,18 @@ def vertex_normals(X, faces, n_vertices=None):
     return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
 
 
-def boundary_loops(faces):
-    """Open boundaries of a triangle mesh: a list of vertex-id arrays, one per connected
-    component of the edges used by a single triangle (holes such as open eyes or mouth)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
+def boundary_edges(faces):
+    """Edges (B,2) used by a single triangle of ``faces`` (F,3): the open boundaries."""
     F = np.asarray(faces, np.int64)
     e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
     u, c = np.unique(e, axis=0, return_counts=True)
-    b = u[c == 1]
+    return u[c == 1]
+
+
+def boundary_loops(faces):
+    """Open boundaries of a triangle mesh: a list of vertex-id arrays, one per connected
+    component of its boundary edges (holes such as open eyes or mouth)."""
+    b = boundary_edges(faces)
     if len(b) == 0:
         return []
     ids, local = np.unique(b, return_inverse=True)

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.signal import find_peaks
+from scipy.spatial import cKDTree
 
 from ..errors import MeshError
 from ..mesh.closest import closest_points
@@ -147,7 +148,6 @@ def _ears(V, F, ids, threshold=EAR_CURVATURE, grow=0.01):
     curved = out[feature_strength(V, F, out) > threshold]
     if len(curved) == 0:
         return np.zeros(len(ids), bool)
-    from scipy.spatial import cKDTree
     d, _ = cKDTree(V[curved]).query(V[ids])
     return d < grow
 

@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 from ..mesh.closest import closest_points
 from ..mesh.sections import point_to_polyline, unique_edges
 from ..mesh.tets import graph_laplacian, harmonic
-from ..mesh.triangles import face_normals, triangle_areas, vertex_normals
+from ..mesh.triangles import boundary_edges, face_normals, triangle_areas, vertex_normals
 
 SNAP_DISTANCE = 0.01          # m: farther template vertices are "off the scan" (sec. 8.1)
 
@@ -112,10 +112,8 @@ def curve_dirichlet(V, curves_t, curves_g, tol):
 
 def boundary_vertices(F, n):
     """Boolean (n,) mask of vertices on open boundary edges."""
-    e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    u, c = np.unique(e, axis=0, return_counts=True)
     mask = np.zeros(n, bool)
-    mask[u[c == 1].ravel()] = True
+    mask[boundary_edges(F).ravel()] = True
     return mask
 
 
