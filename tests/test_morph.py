@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial import cKDTree
 
 from invface.errors import InvfaceError, MeshError
 from invface.mesh.closest import closest_points
@@ -9,6 +10,7 @@ from invface.morph.blendshapes import read_blendshapes, recognised
 from invface.morph.build import build_model
 from invface.morph.curvature import stencil_curvature
 from invface.morph.landmarks import template_landmarks
+from invface.morph.openings import OPENINGS, ordered_loops, split_loop
 from invface.morph.synthetic import random_identity, random_pose
 from invface.morph.target import clean
 
@@ -108,6 +110,18 @@ def test_real_scan_ict_neutral(small_model):
     assert 0.03 < L["stomion"][1] - L["chin"][1] < 0.06
     # the head's width measured on the skull, not across the ears (ears reach |x| > 8.5 cm)
     assert abs(L["head_extreme_L"][0]) < 0.085 and abs(L["head_extreme_R"][0]) < 0.085
+    # the template's closed lid and lip slits lie on the scan's rims, upper half on the upper
+    # rim, so the skin is not torn there; the ears are boxed out, not snapped into stumps
+    assert res.stats["openings_mapped"] == ["eye_L", "eye_R", "mouth"] and res.stats["ear_boxes"] == 2
+    rims = np.concatenate([V[h] for h in boundary_loops(F) if len(h) < 200])
+    for name, (a, b) in OPENINGS.items():
+        halves = next(h for lp in ordered_loops(small_model.triangles) if (h := split_loop(
+            small_model.neutral, small_model.triangles, lp, res.template_landmarks[a], res.template_landmarks[b])))
+        up, lo = (model.neutral[h] for h in halves)
+        assert cKDTree(rims).query(np.concatenate([up, lo]))[0].max() < 0.0015, name
+        assert up[1:-1, 1].mean() > lo[1:-1, 1].mean() + 0.004, name       # opened, not crossed
+    assert np.abs(model.neutral[:, 0]).max() < 0.085
+    assert res.stats["inverted_triangles"] < 40
 
 
 def test_stencil_curvature_of_a_sphere():

@@ -27,7 +27,8 @@ from ..mesh.tets import locate, quality_summary
 from ..model.facemodel import FaceModel
 from .blendshapes import read_blendshapes, recognised
 from .curves import curve_set
-from .landmarks import find_landmarks, template_landmarks
+from .landmarks import ear_boxes, find_landmarks, template_landmarks
+from .openings import ACROSS, map_openings
 from .orient import align_to_template
 from .surface import SurfacePoisson, morph_surface
 from .target import Target, clean
@@ -116,7 +117,14 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     Ct = curve_set(template.neutral, template.triangles, TL)
     lap("curves")
 
-    surf = morph_surface(template.neutral, template.triangles, Va, Fg, Ct, Cg, progress=say)
+    rid, rpos, opened = map_openings(template.neutral, template.triangles, TL, Va, Fg, L)
+    if opened:
+        say(f"openings mapped onto the scan's rims: {', '.join(opened)}")
+        across = {k for name in opened for k in ACROSS[name]}
+        Ct, Cg = ({k: c for k, c in C.items() if k not in across} for C in (Ct, Cg))
+    ears = ear_boxes(Va, Fg, L)
+    surf = morph_surface(template.neutral, template.triangles, Va, Fg, Ct, Cg, rims=(rid, rpos), no_snap=ears,
+                         progress=say)
     lap("surface")
 
     say("volume morph: flesh, bones, muscles")
@@ -184,7 +192,7 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
         "alignment_residual_mm": al.residual * 1000, "flipped_residual_mm": al.flipped_residual * 1000,
         "landmark_to_morph_mm": {k: float(np.linalg.norm(on_model[k] - L[k]) * 1000) for k in L},
         "surface_to_target_mm": {"mean": float(dist.mean() * 1000), "max": float(dist.max() * 1000)},
-        "snapped_fraction": float(surf.snapped.mean()), "inverted_triangles": surf.inverted,
+        "openings_mapped": opened, "ear_boxes": len(ears), "snapped_fraction": float(surf.snapped.mean()), "inverted_triangles": surf.inverted,
         "triangle_relax_rounds": surf.relax_rounds, "tet_relaxed_vertices": vm.relaxed_vertices, "inner_pushed": vm.pushed,
         "tet_relax_rounds": vm.relax_rounds, "quality": q,
         "centerlines_inside": inside_fraction(X1, tets, np.concatenate([m.centerline for m in muscles])),

@@ -152,6 +152,21 @@ def _ears(V, F, ids, threshold=EAR_CURVATURE, grow=0.01):
     return d < grow
 
 
+def ear_boxes(V, F, L, grow=0.005):
+    """Bounding boxes (k,2,3) (min, max corners, m) of the scan's ears (paper 001 sec. 9.1):
+    the high-curvature regions on the outer third of the head between the chin and the top
+    of the head (landmarks L), grown by ``grow``, one box per side that has one. The template
+    has no ears: the surface morph neither snaps onto nor snaps inside these boxes."""
+    ids = np.flatnonzero((V[:, 1] > L["chin"][1]) & (V[:, 1] < L["top_of_head"][1]))
+    ear = ids[_ears(V, F, ids, grow=grow)]
+    boxes = []
+    for side in (1, -1):
+        s = ear[np.sign(V[ear, 0]) == side]
+        if len(s) >= 10:
+            boxes.append([V[s].min(0), V[s].max(0)])
+    return np.array(boxes).reshape(-1, 2, 3)
+
+
 def _chin(P, tip, drop=0.03, prominence=0.002):
     """Index of the chin on the profile P (n,3, bottom to top): going down from the nose tip,
     the first point (at least ``drop`` below the tip) that is a local maximum of z - y, the

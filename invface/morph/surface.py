@@ -12,6 +12,11 @@
 2. Snap: the target is projected onto the smooth morphed template (closest points); each
    morphed template vertex is then located in that projected copy of the target, and the
    same barycentric weights on the real target give its snapped position (Fig. 10c-d).
+   Target triangles that face away from the template where they project (nostril walls and
+   other cavities, which the paper's shrink-wrapped targets do not have) and those in the
+   ear boxes (sec. 9.1) are not snapped onto; template vertices inside an ear box do not
+   snap. The template's eye and lip slits, mapped onto a scan's open eyes and parted lips
+   (openings.py), are Dirichlet data of step 1 and keep their rim positions.
 3. Inverted triangles (normal against the target's interpolated normal) are grown into a
    region (two rings), relaxed with zero-length springs holding the region's boundary, and
    resnapped; repeated a few times.
@@ -121,7 +126,7 @@ def _bary_point(V, F, tri, w):
     return np.einsum("nk,nkj->nj", w, V[F[tri]])
 
 
-def snap(Vm, Ft, Vg, Fg, max_distance=SNAP_DISTANCE):
+def snap(Vm, Ft, Vg, Fg, normals=None, max_distance=SNAP_DISTANCE):
     """Snap the morphed template (Vm (n,3), Ft) onto the target (Vg, Fg) via the target
     projected onto the template (Fig. 10c-d). Returns snapped positions (n,3) and a mask (n,)
     of vertices that found the target (False: off a partial scan, sec. 8.1), and each
@@ -129,6 +134,13 @@ def snap(Vm, Ft, Vg, Fg, max_distance=SNAP_DISTANCE):
     # 1. the target onto the morphed template
     tri, w, dist = closest_points(Vg, Vm, Ft)
     Vproj = _bary_point(Vm, Ft, tri, w)
+    # target triangles facing away from the template where they project (the walls of
+    # nostrils and other cavities, which the paper's shrink-wrapped target does not have)
+    # are not snapped onto
+    Nt = vertex_normals(Vm, Ft) if normals is None else normals
+    facing = np.einsum("ij,ij->i", vertex_normals(Vg, Fg), _bary_point(Nt, Ft, tri, w)) > 0
+    keep = np.flatnonzero(facing[Fg].all(1))
+    Fg = Fg[keep]
     # 2. each template vertex located in the projected target, mapped to the real target
     tri2, w2, d2 = closest_points(Vm, Vproj, Fg)
     snapped = _bary_point(Vg, Fg, tri2, w2)
@@ -137,7 +149,7 @@ def snap(Vm, Ft, Vg, Fg, max_distance=SNAP_DISTANCE):
     # a target triangle whose vertices projected far (behind, across a hole) is unreliable
     far = dist[Fg[tri2]].max(1) > max_distance
     ok = ~at_border & ~far & (d2 < max_distance) & (np.linalg.norm(snapped - Vm, axis=1) < 2 * max_distance)
-    return snapped, ok, tri2, w2
+    return snapped, ok, keep[tri2], w2
 
 
 def inverted_triangles(Vs, Ft, Vg, Fg):
@@ -149,20 +161,25 @@ def inverted_triangles(Vs, Ft, Vg, Fg):
     return np.einsum("ij,ij->i", fn, gn) < 0
 
 
-def relax_region(Vs, Ft, bad_tris, rings=2):
-    """Relax the vertices around ``bad_tris`` with zero-length springs (a uniform-weight
-    harmonic solve) holding the region's boundary; returns new positions (n,3) and the
-    region mask (n,)."""
-    n = len(Vs)
-    region = np.zeros(n, bool)
-    region[np.unique(Ft[bad_tris])] = True
+def _rings(F, ids, n, rings):
+    """Boolean (n,) mask of vertices ``ids`` grown by ``rings`` triangle rings."""
+    mask = np.zeros(n, bool)
+    mask[ids] = True
     for _ in range(rings):
-        grow = region[Ft].any(1)
-        region[np.unique(Ft[grow])] = True
+        mask[F[mask[F].any(1)].ravel()] = True
+    return mask
+
+
+def relax_region(Vs, Ft, bad_tris, rings=2, held=()):
+    """Relax the vertices around ``bad_tris`` with zero-length springs (a uniform-weight
+    harmonic solve) holding the region's boundary and the vertices ``held``; returns new
+    positions (n,3) and the region mask (n,)."""
+    n = len(Vs)
+    region = _rings(Ft, np.unique(Ft[bad_tris]), n, rings)
     Lu = graph_laplacian(unique_edges(Ft)[0], n)
     # the region's outer ring is held: free = region minus vertices touching the outside
     touching = np.asarray(Lu @ (~region).astype(float)).ravel() < 0
-    free = np.flatnonzero(region & ~touching)
+    free = np.setdiff1d(np.flatnonzero(region & ~touching), held)
     if len(free) == 0:
         return Vs.copy(), region
     fixed = np.setdiff1d(np.arange(n), free)
@@ -185,24 +202,55 @@ class SurfaceMorph:
     target_weights: np.ndarray
 
 
-def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, relax_rounds=4, progress=None):
+def in_boxes(P, boxes):
+    """Boolean (n,) of points P (n,3) inside any of the boxes (k,2,3) (min, max corners)."""
+    P = np.asarray(P)
+    inside = np.zeros(len(P), bool)
+    for lo, hi in boxes:
+        inside |= ((P >= lo) & (P <= hi)).all(1)
+    return inside
+
+
+def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), relax_rounds=4, progress=None):
     """Morph the template skin (Vt (n,3), Ft) onto the aligned target (Vg, Fg) using matched
-    curve pairs (``curves_t`` on the template, ``curves_g`` on the target). Returns SurfaceMorph."""
+    curve pairs (``curves_t`` on the template, ``curves_g`` on the target) and, optionally,
+    ``rims`` = (template vertex ids (k,), their positions (k,3) on the target's eye and lip
+    openings) from openings.map_openings: Dirichlet data of the Poisson morph that the snap
+    keeps; curve vertices within two rings of them are left to the rims. ``no_snap``: boxes
+    (k,2,3) (the scan's ears, sec. 9.1) where no target triangle is snapped onto and no
+    template vertex snaps; the Poisson fill closes them. Returns SurfaceMorph."""
     say = progress or (lambda m: None)
     edge = float(np.median(np.linalg.norm(Vt[Ft[:, 0]] - Vt[Ft[:, 1]], axis=1)))
     ids, disp = curve_dirichlet(Vt, curves_t, curves_g, tol=0.6 * edge)
-    say(f"surface Poisson: {len(ids)} curve vertices as Dirichlet data")
+    rid, rpos = rims if rims is not None else (np.zeros(0, np.int64), np.zeros((0, 3)))
+    rtri, rw = np.zeros(0, np.int64), np.zeros((0, 3))
+    if len(rid):
+        keep = ~_rings(Ft, rid, len(Vt), 2)[ids]
+        ids, disp = np.concatenate([ids[keep], rid]), np.concatenate([disp[keep], rpos - Vt[rid]])
+        rtri, rw, _ = closest_points(rpos, Vg, Fg)
+    say(f"surface Poisson: {len(ids)} curve and rim vertices as Dirichlet data")
     solver = SurfacePoisson(Vt, Ft)
     Vm = Vt + solver.solve(ids, disp)
+
+    Nt = vertex_normals(Vt, Ft)
+    usable = np.flatnonzero(~in_boxes(Vg[Fg].mean(1), np.reshape(no_snap, (-1, 2, 3))))
+
+    def snap_keeping_rims(V):
+        Vs, ok, tri, w = snap(V, Ft, Vg, Fg[usable], normals=Nt)
+        tri = usable[tri]
+        ok &= ~in_boxes(V, np.reshape(no_snap, (-1, 2, 3)))
+        Vs[rid], ok[rid], tri[rid], w[rid] = rpos, True, rtri, rw
+        return Vs, ok, tri, w
+
     say("snapping onto the target")
-    Vs, ok, tri, w = snap(Vm, Ft, Vg, Fg)
+    Vs, ok, tri, w = snap_keeping_rims(Vm)
     rounds = 0
     bad = inverted_triangles(np.where(ok[:, None], Vs, Vm), Ft, Vg, Fg) & ok[Ft].all(1)
     while bad.any() and rounds < relax_rounds:
         rounds += 1
         say(f"relaxing {int(bad.sum())} inverted triangles (round {rounds})")
-        relaxed, region = relax_region(np.where(ok[:, None], Vs, Vm), Ft, bad)
-        Vs2, ok2, tri2, w2 = snap(relaxed, Ft, Vg, Fg)
+        relaxed, region = relax_region(np.where(ok[:, None], Vs, Vm), Ft, bad, held=rid)
+        Vs2, ok2, tri2, w2 = snap_keeping_rims(relaxed)
         Vs = np.where(region[:, None], Vs2, Vs)
         ok = np.where(region, ok2, ok)
         tri = np.where(region, tri2, tri)

@@ -1,0 +1,111 @@
+"""Eye and mouth openings: the template's lid and lip slits mapped onto a scan's rims.
+
+The template's eyes and mouth are closed slits: each is a boundary loop of the skin whose
+two halves (upper and lower lid, upper and lower lip) meet at the corners. A scan with open
+eyes or parted lips has a wider hole there. Snapping the slit vertex by vertex onto such a
+hole tears the lids and lips apart unevenly (both halves find the nearer rim). Instead each
+half of the template's slit is mapped onto the matching half of the scan's rim, corner to
+corner by normalised arc length; these are Dirichlet data of the surface morph and the
+positions the snap keeps (paper 001 sec. 8: curves drive the morph; the rims are the
+scan's hard eye and lip curves).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..mesh.sections import arc_length
+from ..mesh.triangles import boundary_edges
+
+# the openings and the landmarks at their ends
+OPENINGS = {"eye_L": ("eye_inner_L", "eye_outer_L"), "eye_R": ("eye_inner_R", "eye_outer_R"),
+            "mouth": ("mouth_corner_L", "mouth_corner_R")}
+# the feature curves that run across each opening: its rims replace them once it is mapped
+ACROSS = {"eye_L": (("eye_inner_L", "eye_outer_L"),), "eye_R": (("eye_inner_R", "eye_outer_R"),),
+          "mouth": (("mouth_corner_L", "stomion"), ("stomion", "mouth_corner_R"))}
+CORNER_TOL = 0.003      # m: a loop belongs to an opening when it passes this close to both corners
+
+
+def ordered_loops(faces):
+    """The open boundaries of a triangle mesh as ordered cycles: a list of vertex-id arrays
+    (each loop once round, no repeat); boundaries that are not simple cycles are left out."""
+    b = boundary_edges(faces)
+    nxt = {}
+    for i, j in b:
+        nxt.setdefault(int(i), []).append(int(j))
+        nxt.setdefault(int(j), []).append(int(i))
+    seen, loops = set(), []
+    for start in nxt:
+        if start in seen or len(nxt[start]) != 2:
+            continue
+        loop, prev, cur = [start], None, start
+        while True:
+            seen.add(cur)
+            nb = nxt[cur]
+            if len(nb) != 2:
+                loop = None
+                break
+            step = nb[0] if nb[0] != prev else nb[1]
+            if step == start:
+                break
+            prev, cur = cur, step
+            loop.append(cur)
+        if loop is not None and len(loop) >= 6:
+            loops.append(np.array(loop))
+    return loops
+
+
+def _side_height(V, F, half):
+    """Mean height of the triangles touching the inner vertices of a loop half: the lid or
+    lip the half borders (a closed slit's two halves lie on top of each other)."""
+    touch = np.isin(F, half[1:-1]).any(1)
+    return V[F[touch]].mean(axis=(0, 1))[1]
+
+
+def split_loop(V, F, loop, a, b, tol=CORNER_TOL):
+    """Split an ordered boundary loop (k,) of the mesh (V, F) at the vertices nearest the
+    corner points a and b (3,) into its upper and lower halves, each running from a's vertex
+    to b's vertex. Returns (upper ids, lower ids), or None when the loop misses a corner by
+    more than tol."""
+    da, db = (np.linalg.norm(V[loop] - p, axis=1) for p in (a, b))
+    ia, ib = int(np.argmin(da)), int(np.argmin(db))
+    if da[ia] > tol or db[ib] > tol or ia == ib:
+        return None
+    k = len(loop)
+    one = loop[np.arange(ia, ia + (ib - ia) % k + 1) % k]
+    two = loop[np.arange(ia, ia - (ia - ib) % k - 1, -1) % k]
+    if min(len(one), len(two)) < 3:
+        return None
+    return (one, two) if _side_height(V, F, one) >= _side_height(V, F, two) else (two, one)
+
+
+def _along(P, s):
+    """Points on polyline P (m,3) at normalised arc lengths s (k,) in [0,1]."""
+    t = arc_length(P)
+    t = t / max(t[-1], 1e-12)
+    return np.stack([np.interp(s, t, P[:, c]) for c in range(3)], axis=1)
+
+
+def map_openings(Vt, Ft, TL, Vg, Fg, L):
+    """Template slit vertices and their places on the scan's rims.
+
+    Vt (n,3), Ft: template skin; TL: template landmarks {name: (3,)}. Vg (m,3), Fg: the
+    aligned scan; L: its landmarks. For every opening of OPENINGS that is a boundary loop on
+    both meshes, each template half maps onto the scan half by normalised arc length.
+    Returns (ids (k,) template vertex ids, positions (k,3) on the scan, names list)."""
+    loops_t, loops_g = ordered_loops(Ft), ordered_loops(Fg)
+    ids, pos, names = [], [], []
+    for name, (a, b) in OPENINGS.items():
+        halves_t = next((h for lp in loops_t if (h := split_loop(Vt, Ft, lp, TL[a], TL[b])) is not None), None)
+        halves_g = next((h for lp in loops_g if (h := split_loop(Vg, Fg, lp, L[a], L[b])) is not None), None)
+        if halves_t is None or halves_g is None:
+            continue
+        for ht, hg in zip(halves_t, halves_g):
+            s = arc_length(Vt[ht])
+            ids.append(ht)
+            pos.append(_along(Vg[hg], s / max(s[-1], 1e-12)))
+        names.append(name)
+    if not ids:
+        return np.zeros(0, np.int64), np.zeros((0, 3)), []
+    ids, pos = np.concatenate(ids), np.concatenate(pos)
+    ids, first = np.unique(ids, return_index=True)      # corners are in both halves
+    return ids, pos[first], names
