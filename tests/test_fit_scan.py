@@ -69,3 +69,38 @@ def test_scan_fit_rejects_bad_scans(small_expressive_model):
         fit_scan(m, bad)
     with pytest.raises(InvfaceError, match="align the scan"):
         fit_scan(m, m.neutral + [0.5, 0, 0], m.triangles, mode="nearest")
+
+
+@pytest.fixture(scope="module")
+def ict_actor(small_expressive_model):
+    """The small template morphed onto the ICT-FaceKit neutral, the template's expressions
+    carried over (skips without ../shared)."""
+    from conftest import ICT
+    from invface.morph.build import build_model
+    if not (ICT / "expressions.npz").exists():
+        pytest.skip("ICT-FaceKit data (../shared/data/ict-facekit) is not available")
+    model, _ = build_model(ICT / "neutral.obj", template=small_expressive_model, expressions="copy")
+    return model
+
+
+@pytest.mark.parametrize("kind", ["blendshape", "simulation"])
+def test_ict_expression_as_a_real_scan(ict_actor, kind):
+    """An ICT-FaceKit expression (scan-derived, another rig, never seen by the model) fitted
+    in nearest mode: the jaw opens and the moving part of the scan comes much closer."""
+    from conftest import ICT
+    from invface.mesh.closest import closest_points
+    from invface.mesh.meshfile import read_mesh
+    m = ict_actor
+    V0, F = read_mesh(ICT / "neutral.obj")
+    data = np.load(ICT / "expressions.npz")
+    delta = data["deltas"][list(data["names"]).index("jawOpen")]
+    A = m.scan_transform
+    S = (V0 + delta) @ A[:3, :3].T + A[:3, 3]
+    covered = closest_points(V0 @ A[:3, :3].T + A[:3, 3], m.neutral, m.triangles)[2] < 0.002
+    moving = S[(np.linalg.norm(delta, axis=1) * np.linalg.norm(A[:3, 0]) > 0.001) & covered]
+    before = np.median(closest_points(moving, m.neutral, m.triangles)[2])
+    fit = fit_scan(m, S, F, kind=kind, mode="nearest", max_iter=20)
+    after = np.median(closest_points(moving, fit.surface, m.triangles)[2])
+    assert before > 0.002                                  # the ICT jaw opens by centimetres
+    assert after < 0.7 * before, (before, after)           # measured: 2.9 -> 1.7 mm
+    assert fit.p[len(m.blendshape_names)] > 0.08              # the hinge opens (measured 0.15 rad)

@@ -2,6 +2,9 @@
 
     result = dogleg(fun, x0, lower, upper)      # fun(x) -> (r (m,), J (m, n))
 
+A trial point where the model cannot be evaluated (the simulation raises SimulationError)
+is a rejected step: the trust radius shrinks.
+
 Minimises 0.5 |r(x)|^2 (paper 000 fits Eq. 12-16 with Chumpy's dogleg). Each step combines
 the Gauss-Newton step (J^T J p = -J^T r) and the Cauchy point inside a trust region; the
 region grows after good steps and shrinks after poor ones, by the ratio of actual to
@@ -18,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError
+from ..sim.quasistatic import SimulationError
 
 
 @dataclass
@@ -90,10 +94,13 @@ def dogleg(fun, x0, lower=None, upper=None, max_iter=50, radius=1.0, ftol=1e-10,
             Jp = J @ p
             predicted = -(g @ p + 0.5 * Jp @ Jp)
         x_new = x + p
-        r_new, J_new = fun(x_new)
-        cost_new = 0.5 * float(r_new @ r_new)
+        try:
+            r_new, J_new = fun(x_new)
+            cost_new = 0.5 * float(r_new @ r_new)
+        except SimulationError:       # the model cannot reach this trial point: reject, shrink
+            cost_new = np.inf
         actual = cost - cost_new
-        rho = actual / predicted if predicted > 0 else -1.0
+        rho = actual / predicted if predicted > 0 and np.isfinite(cost_new) else -1.0
         if rho < 0.25:
             radius = 0.25 * np.linalg.norm(p)
         elif rho > 0.75 and np.linalg.norm(p) >= 0.9 * radius:

@@ -11,10 +11,13 @@ Two correspondence modes:
 
 - ``correspondence``: the scan shares the model's topology (vertex count and order), as in
   the paper; residuals are the vertex differences.
-- ``nearest``: any topology; each model vertex is paired with its closest scan point and the
-  residual is the point-to-plane distance n . (x_R - y) along the scan normal. Pairs farther
-  than ``max_distance`` or on scan boundaries are dropped; pairs are refreshed between
-  dogleg rounds (ICP style) until they stop changing.
+- ``nearest``: any topology, symmetric point-to-plane ICP. Each model vertex is paired with
+  its closest scan point (residual n . (x_R - y) along the scan normal) and each scan vertex
+  with its closest model point (residual along the model normal there): the second set pulls
+  model parts toward scan parts that no model vertex sees yet (a jaw opened by centimetres).
+  Pairs that land on the other mesh's open boundary, or farther than the gate, are dropped;
+  the gate starts at ``start_distance`` and halves each round down to ``max_distance``; pairs
+  are refreshed between dogleg rounds until they stop changing.
 """
 from __future__ import annotations
 
@@ -23,6 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InvfaceError
+from ..mesh.closest import closest_points
+from ..mesh.triangles import boundary_edges, face_normals
 from ..model.rig import euler_xyz, euler_xyz_derivatives
 from .dogleg import dogleg
 
@@ -101,6 +106,7 @@ class _Objective:
     def __init__(self, surface_model, lam, P):
         self.sm, self.lam, self.P = surface_model, lam, P
         self.pairs = None                  # (vertex ids, scan points, scan normals) in nearest mode
+        self.back = None                   # (model triangles' vertex ids, barycentrics, scan points, model normals)
 
     def posed(self, z):
         return posed_surface(self.sm, z, self.P)
@@ -114,23 +120,35 @@ class _Objective:
             vid, y, n = self.pairs
             r = np.einsum("ij,ij->i", xr[vid] - y, n)
             J = np.einsum("kij,ij->ik", Jall[:, vid], n)
+            if self.back is not None and len(self.back[0]):
+                tv, b, yb, nb = self.back
+                rb = np.einsum("ij,ij->i", np.einsum("ia,iaj->ij", b, xr[tv]) - yb, nb)
+                Jb = sum(b[:, a, None] * np.einsum("kij,ij->ik", Jall[:, tv[:, a]], nb) for a in range(3))
+                r, J = np.r_[r, rb], np.vstack([J, Jb])
         reg, Jreg = regulariser(z, self.P, self.lam)
         return np.r_[r, reg], np.vstack([J, Jreg])
 
 
-def _closest(scan_vertices, scan_faces, points):
-    """Closest points (N,3) on the scan and the scan face normals there (N,3)."""
-    from ..mesh.closest import closest_points
-    from ..mesh.triangles import face_normals
-    tri, bary, _ = closest_points(points, scan_vertices, scan_faces)
-    q = np.einsum("nk,nkj->nj", bary, scan_vertices[scan_faces[tri]])
-    n = face_normals(scan_vertices, scan_faces[tri])
-    return q, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30), tri
+def _closest(V, F, points, border=None):
+    """Closest points (N,3) on the mesh (V, F), its unit face normals there (N,3), the
+    triangles (N,) and barycentrics (N,3), and whether each lies on an open boundary edge
+    (N,) (``border``: boolean (n,) of the mesh's boundary vertices)."""
+    tri, bary, _ = closest_points(points, V, F)
+    q = np.einsum("nk,nkj->nj", bary, V[F[tri]])
+    n = face_normals(V, F[tri])
+    edge = np.zeros(len(points), bool) if border is None else (border[F[tri]] | (bary < 1e-9)).all(1)
+    return q, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30), tri, bary, edge
+
+
+def _border(F, n):
+    mask = np.zeros(n, bool)
+    mask[boundary_edges(F).ravel()] = True
+    return mask
 
 
 def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="correspondence",
              lam=LAMBDA, p0=None, rotation=None, translation=None, max_iter=50,
-             max_distance=0.01, rounds=8, progress=None):
+             max_distance=0.01, start_distance=0.03, rounds=8, progress=None):
     """Fit controls and rigid pose of ``model`` to a scan (metres). Returns a ScanFit.
 
     scan_vertices (S,3); scan_faces (G,3) (needed in ``nearest`` mode); kind: "blendshape"
@@ -158,22 +176,27 @@ def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="cor
         res = dogleg(lambda zz: obj(zz, S), z, lo, hi, max_iter=max_iter, progress=progress)
         z, history, status = res.x, res.history, res.status
     else:
-        F = np.asarray(scan_faces)
+        F, Fm = np.asarray(scan_faces), model.triangles
+        scan_border, model_border = _border(F, len(S)), _border(Fm, V)
         status, last = "rounds", None
         for rnd in range(rounds):
+            gate = max(max_distance, start_distance * 0.5 ** rnd)
             _, xr = obj.posed(z)
-            q, n, tri = _closest(S, F, xr)
-            d = np.linalg.norm(xr - q, axis=1)
-            vid = np.flatnonzero(d < max_distance)
+            q, n, tri, _, edge = _closest(S, F, xr, scan_border)
+            vid = np.flatnonzero((np.linalg.norm(xr - q, axis=1) < gate) & ~edge)
             if len(vid) < 20:
-                raise InvfaceError(f"only {len(vid)} model vertices lie within {max_distance * 1000:.0f} mm "
+                raise InvfaceError(f"only {len(vid)} model vertices lie within {gate * 1000:.0f} mm "
                                    "of the scan: align the scan to the model first (metres, +Y up, +Z front)")
             obj.pairs = (vid, q[vid], n[vid])
+            qb, nb, trib, bb, edgeb = _closest(xr, Fm, S, model_border)
+            sid = np.flatnonzero((np.linalg.norm(S - qb, axis=1) < gate) & ~edgeb)
+            obj.back = (Fm[trib[sid]], bb[sid], S[sid], nb[sid])
             res = dogleg(obj, z, lo, hi, max_iter=max_iter, progress=progress)
             z = res.x
             history += [dict(h, round=rnd) for h in res.history]
-            key = tri[vid]
-            if last is not None and len(key) == len(last) and np.mean(key != last) < 0.01:
+            key = np.r_[tri[vid], trib[sid]]
+            if (gate == max_distance and last is not None and len(key) == len(last)
+                    and np.mean(key != last) < 0.01):
                 status = "converged"
                 break
             last = key
@@ -181,7 +204,7 @@ def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="cor
     if mode == "correspondence":
         err = np.linalg.norm(xr - S, axis=1)
     else:
-        q, _, _ = _closest(S, np.asarray(scan_faces), xr)
+        q = _closest(S, np.asarray(scan_faces), xr)[0]
         err = np.linalg.norm(xr - q, axis=1)
     acts = {}
     if kind == "simulation":

@@ -1,6 +1,7 @@
 """Reading triangle meshes (OBJ, PLY) through trimesh, with errors that name the file."""
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -9,14 +10,19 @@ from ..errors import MeshError
 
 
 def read_mesh(path):
-    """(vertices (n,3), faces (f,3)) of an OBJ/PLY file in its own units, unprocessed."""
+    """(vertices (n,3), faces (f,3)) of an OBJ/PLY file in its own units, unprocessed, in the
+    file's vertex order (an OBJ's vertices are not split at texture seams), so per-vertex data
+    that refers to the file by index (blendshape deltas, landmark ids) stays valid."""
     import trimesh
 
     path = Path(path)
     if not path.is_file():
         raise MeshError(f"{path}: mesh file not found")
+    order = {"maintain_order": True} if path.suffix.lower() == ".obj" else {}
     try:
-        mesh = trimesh.load(path, process=False, force="mesh")
+        with warnings.catch_warnings():      # trimesh's texture bookkeeping warns on seams
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mesh = trimesh.load(path, process=False, force="mesh", **order)
     except Exception as e:  # noqa: BLE001 - trimesh raises many kinds
         raise MeshError(f"{path}: not a readable mesh ({e})") from None
     V = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), float)
