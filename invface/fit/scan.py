@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import InvfaceError
 from ..mesh.closest import closest_points
-from ..mesh.triangles import boundary_edges, face_normals
+from ..mesh.triangles import boundary_vertices, face_normals
 from ..model.rig import euler_xyz, euler_xyz_derivatives
 from .dogleg import dogleg
 
@@ -140,12 +140,6 @@ def _closest(V, F, points, border=None):
     return q, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30), tri, bary, edge
 
 
-def _border(F, n):
-    mask = np.zeros(n, bool)
-    mask[boundary_edges(F).ravel()] = True
-    return mask
-
-
 def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="correspondence",
              lam=LAMBDA, p0=None, rotation=None, translation=None, max_iter=50,
              max_distance=0.01, start_distance=0.03, rounds=8, progress=None):
@@ -177,7 +171,7 @@ def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="cor
         z, history, status = res.x, res.history, res.status
     else:
         F, Fm = np.asarray(scan_faces), model.triangles
-        scan_border, model_border = _border(F, len(S)), _border(Fm, V)
+        scan_border, model_border = boundary_vertices(F, len(S)), boundary_vertices(Fm, V)
         status, last = "rounds", None
         for rnd in range(rounds):
             gate = max(max_distance, start_distance * 0.5 ** rnd)

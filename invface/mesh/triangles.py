@@ -37,6 +37,13 @@ def boundary_edges(faces):
     return u[c == 1]
 
 
+def boundary_vertices(faces, n):
+    """Boolean (n,) mask of the vertices on open boundary edges of ``faces`` (F,3)."""
+    mask = np.zeros(n, bool)
+    mask[boundary_edges(faces).ravel()] = True
+    return mask
+
+
 def boundary_loops(faces):
     """Open boundaries of a triangle mesh: a list of vertex-id arrays, one per connected
     component of its boundary edges (holes such as open eyes or mouth)."""

@@ -36,7 +36,7 @@ from scipy.spatial import cKDTree
 from ..mesh.closest import closest_points
 from ..mesh.sections import point_to_polyline, unique_edges
 from ..mesh.tets import graph_laplacian, harmonic
-from ..mesh.triangles import boundary_edges, face_normals, triangle_areas, vertex_normals
+from ..mesh.triangles import boundary_vertices, face_normals, triangle_areas, vertex_normals
 
 SNAP_DISTANCE = 0.01          # m: farther template vertices are "off the scan" (sec. 8.1)
 
@@ -113,13 +113,6 @@ def curve_dirichlet(V, curves_t, curves_g, tol):
         np.add.at(cnt, cand, 1)
     ids = np.flatnonzero(cnt)
     return ids, acc[ids] / cnt[ids, None]
-
-
-def boundary_vertices(F, n):
-    """Boolean (n,) mask of vertices on open boundary edges."""
-    mask = np.zeros(n, bool)
-    mask[boundary_edges(F).ravel()] = True
-    return mask
 
 
 def _bary_point(V, F, tri, w):
