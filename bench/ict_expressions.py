@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 import invface
-from invface.fit.scan import fit_scan
+from invface.fit.scan import fit_scan, write_scan_fit
 from invface.mesh.closest import closest_points
 from invface.mesh.meshfile import read_mesh
 from invface.morph.build import build_model
@@ -45,18 +45,6 @@ def errors_mm(points, surface, triangles):
     """Median and 95th percentile (mm) of the distances of points (n,3) to the surface."""
     d = closest_points(points, surface, triangles)[2] * 1000
     return float(np.median(d)), float(np.percentile(d, 95))
-
-
-def save_fit(folder, model, fit, name, seconds, before):
-    """fit.json + fit.npz in fit-scan's layout, for the HTML report."""
-    folder.mkdir(parents=True, exist_ok=True)
-    s = fit.summary(model)
-    s.update(scan=f"ICT-FaceKit {name}", mode="nearest", lam=1e-6, seconds=seconds, history=fit.history,
-             notes=[f"error before the fit (neutral model): median {before[0]:.2f} mm, 95% {before[1]:.2f} mm"])
-    (folder / "fit.json").write_text(json.dumps(s, indent=1))
-    err = np.nan_to_num(fit.error, nan=0.0)
-    np.savez_compressed(folder / "fit.npz", surface=fit.surface, triangles=model.triangles,
-                        neutral=model.neutral, vertex_error=err, p=fit.p)
 
 
 def main():
@@ -107,7 +95,9 @@ def main():
             row[kind] = {"after_mm": after, "seconds": secs, "nonzero": int(np.sum(fit.p[:K] > 1e-3)),
                          "jaw_rad": float(fit.p[K]), "rotation_deg": float(np.degrees(np.linalg.norm(fit.rotation))),
                          "top": [(k, round(float(v), 3)) for k, v in top]}
-            save_fit(out / name / kind, model, fit, name, secs, before)
+            write_scan_fit(out / name / kind, model, fit, scan=f"ICT-FaceKit {name}", mode="nearest", lam=1e-6,
+                           seconds=secs, notes=[f"error before the fit (neutral model): median {before[0]:.2f} mm, "
+                                                f"95% {before[1]:.2f} mm"])
         b, s = row["blendshape"], row.get("simulation")
         print(f"{name:18s} {before[0]:5.2f} / {before[1]:5.2f} {b['after_mm'][0]:5.2f} / {b['after_mm'][1]:5.2f} "
               f"{b['seconds']:6.1f} " + (f"{s['after_mm'][0]:5.2f} / {s['after_mm'][1]:5.2f} {s['seconds']:6.1f}" if s else ""),

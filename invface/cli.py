@@ -245,7 +245,7 @@ def cmd_fit_scan(args):
     """Fit controls and pose to a 3D scan (Eq. 13); write fit.json and the fitted mesh."""
     from tqdm import tqdm
 
-    from .fit.scan import fit_scan
+    from .fit.scan import fit_scan, write_scan_fit
     from .mesh.meshfile import read_mesh
     model = _load_model(args.model, args.resolution)
     V, F = read_mesh(args.scan)  # metres
@@ -259,18 +259,9 @@ def cmd_fit_scan(args):
                            cost=f"{h['cost']:.3g}")))
     finally:
         bar.close()
-    summary = fit.summary(model)
-    summary.update(scan=str(args.scan), mode=args.mode, lam=args.lam,
-                   seconds=time.perf_counter() - t0, history=fit.history)
-    tmp = out / "fit.json.tmp"
-    tmp.write_text(json.dumps(summary, indent=1))
-    tmp.replace(out / "fit.json")
+    summary = write_scan_fit(out, model, fit, scan=str(args.scan), mode=args.mode, lam=args.lam,
+                             seconds=time.perf_counter() - t0)
     _save_mesh(out / "fitted.ply", fit.surface, model.triangles)
-    import numpy as np
-    tmp = out / "fit.npz.tmp.npz"
-    np.savez_compressed(tmp, surface=fit.surface, triangles=model.triangles, neutral=model.neutral,
-                        vertex_error=fit.error, p=fit.p)
-    tmp.replace(out / "fit.npz")
     from .report.fit import write_report
     page = write_report(out, title=f"invface scan fit: {Path(args.scan).name}")
     e = summary["error_mm"]

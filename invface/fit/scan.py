@@ -21,7 +21,10 @@ Two correspondence modes:
 """
 from __future__ import annotations
 
+import json
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -206,3 +209,20 @@ def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="cor
         acts = {m.name: float(v) for m, v in zip(model.muscles, a)}
     return ScanFit(p=z[:P], rotation=z[P:P + 3], translation=z[P + 3:], surface=xr, error=err,
                    kind=kind, history=history, status=status, activations=acts)
+
+
+def write_scan_fit(folder, model, fit, **extra):
+    """Write ``fit.json`` (the fit's summary, its history and ``extra``) and ``fit.npz``
+    (posed surface, neutral, per-vertex error (V,) m, controls) into ``folder``, each through
+    a temporary file; the report (``invface.report.fit``) reads them. Returns the summary."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    summary = dict(fit.summary(model), history=fit.history, **extra)
+    tmp = folder / "fit.json.tmp"
+    tmp.write_text(json.dumps(summary, indent=1))
+    os.replace(tmp, folder / "fit.json")
+    tmp = folder / "fit.npz.tmp.npz"
+    np.savez_compressed(tmp, surface=fit.surface, triangles=model.triangles, neutral=model.neutral,
+                        vertex_error=fit.error, p=fit.p)
+    os.replace(tmp, folder / "fit.npz")
+    return summary

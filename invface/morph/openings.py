@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh.sections import arc_length
+from ..mesh.sections import arc_length, resample
 from ..mesh.triangles import boundary_edges
 
 # the openings and the landmarks at their ends
@@ -78,13 +78,6 @@ def split_loop(V, F, loop, a, b, tol=CORNER_TOL):
     return (one, two) if _side_height(V, F, one) >= _side_height(V, F, two) else (two, one)
 
 
-def _along(P, s):
-    """Points on polyline P (m,3) at normalised arc lengths s (k,) in [0,1]."""
-    t = arc_length(P)
-    t = t / max(t[-1], 1e-12)
-    return np.stack([np.interp(s, t, P[:, c]) for c in range(3)], axis=1)
-
-
 def map_openings(Vt, Ft, TL, Vg, Fg, L):
     """Template slit vertices and their places on the scan's rims.
 
@@ -100,9 +93,9 @@ def map_openings(Vt, Ft, TL, Vg, Fg, L):
         if halves_t is None or halves_g is None:
             continue
         for ht, hg in zip(halves_t, halves_g):
-            s = arc_length(Vt[ht])
+            s, t = arc_length(Vt[ht]), arc_length(Vg[hg])
             ids.append(ht)
-            pos.append(_along(Vg[hg], s / max(s[-1], 1e-12)))
+            pos.append(resample(Vg[hg], s / max(s[-1], 1e-12) * t[-1], t))
         names.append(name)
     if not ids:
         return np.zeros(0, np.int64), np.zeros((0, 3)), []

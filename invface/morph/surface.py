@@ -226,12 +226,13 @@ def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), rel
     Vm = Vt + solver.solve(ids, disp)
 
     Nt = vertex_normals(Vt, Ft)
-    usable = np.flatnonzero(~in_boxes(Vg[Fg].mean(1), np.reshape(no_snap, (-1, 2, 3))))
+    boxes = np.reshape(no_snap, (-1, 2, 3))
+    usable = np.flatnonzero(~in_boxes(Vg[Fg].mean(1), boxes))
 
     def snap_keeping_rims(V):
         Vs, ok, tri, w = snap(V, Ft, Vg, Fg[usable], normals=Nt)
         tri = usable[tri]
-        ok &= ~in_boxes(V, np.reshape(no_snap, (-1, 2, 3)))
+        ok &= ~in_boxes(V, boxes)
         Vs[rid], ok[rid], tri[rid], w[rid] = rpos, True, rtri, rw
         return Vs, ok, tri, w
 
