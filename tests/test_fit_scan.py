@@ -104,3 +104,26 @@ def test_ict_expression_as_a_real_scan(ict_actor, kind):
     assert before > 0.002                                  # the ICT jaw opens by centimetres
     assert after < 0.7 * before, (before, after)           # measured: 2.9 -> 1.7 mm
     assert fit.p[len(m.blendshape_names)] > 0.08              # the hinge opens (measured 0.15 rad)
+
+
+def test_nearest_mode_jacobian_matches_finite_differences(small_expressive_model):
+    """Both pair sets of the symmetric point-to-plane objective (model-to-scan and
+    scan-to-model, barycentric) differentiate correctly in controls and pose."""
+    from invface.fit.scan import _closest, _Objective
+    m = small_expressive_model
+    P = len(m.blendshape_names) + 6
+    obj = _Objective(m.surface_model("blendshape"), 1e-6, P)
+    rng = np.random.default_rng(3)
+    z = np.r_[rng.uniform(0, 0.4, P - 6), [0.05, 0, 0, 0, 0, 0], ROT, TR]
+    _, xr = obj.posed(z)
+    S = m.neutral[::7] + rng.normal(0, 0.002, (len(m.neutral[::7]), 3))
+    y = xr[::5] + rng.normal(0, 0.001, (len(xr[::5]), 3))
+    nrm = rng.normal(size=y.shape)
+    obj.pairs = (np.arange(0, len(xr), 5), y, nrm / np.linalg.norm(nrm, axis=1, keepdims=True))
+    _, nb, trib, bb, _ = _closest(xr, m.triangles, S)
+    obj.back = (m.triangles[trib], bb, S, nb)
+    r, J = obj(z)
+    assert len(r) == len(y) + len(S) + P
+    d = rng.normal(size=len(z)) * 1e-6
+    fd = (obj(z + d)[0] - obj(z - d)[0]) / 2
+    np.testing.assert_allclose(J @ d, fd, rtol=1e-4, atol=1e-12)
