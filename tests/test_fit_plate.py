@@ -43,12 +43,18 @@ def test_pyramid_is_opencv_pyrdown_and_its_adjoint_is_exact():
         assert G(a) @ b == pytest.approx(float((a * G.adjoint(b)).sum()), rel=1e-10)
 
 
-def test_shading_gradient_matches_finite_differences(small_expressive_model):
-    m = small_expressive_model
+def _shading_scene(m):
+    """(camera, controls p, light, albedo, noise-free plate of p) for the objective's tests."""
     cam = _cam()
-    p, (x, xr) = _truth(m)
+    p, (x, _) = _truth(m)
     g, a = studio_light(), skin_albedo(m)
     plate, _ = render_plate(m, x, cam, g, a, ROT, TR, spp=16, noise=0.0)
+    return cam, p, g, a, plate
+
+
+def test_shading_gradient_matches_finite_differences(small_expressive_model):
+    m = small_expressive_model
+    cam, p, g, a, plate = _shading_scene(m)
     P = len(p)
     obj = ShadingObjective(m, m.surface_model("blendshape"), cam, plate, g, a, np.zeros(P), spp=32,
                            silhouette_spp=4)
@@ -70,10 +76,7 @@ def test_shading_mask_restricts_the_data_term_and_its_gradient(small_expressive_
     """E_2 = G(M (F* - F)): an empty mask leaves no image term; the lower half's gradient
     matches finite differences."""
     m = small_expressive_model
-    cam = _cam()
-    p, (x, _) = _truth(m)
-    g, a = studio_light(), skin_albedo(m)
-    plate, _ = render_plate(m, x, cam, g, a, ROT, TR, spp=16, noise=0.0)
+    cam, p, g, a, plate = _shading_scene(m)
     P = len(p)
     z = np.r_[p * 0.6, ROT, TR]
     sm = m.surface_model("blendshape")
