@@ -54,6 +54,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import BundleError, ConfigError, ImageError
+from ..mesh.triangles import unique_edges
 from ..model.rig import euler_xyz
 from ..render import shading
 from ..render.camera import Camera
@@ -118,9 +119,7 @@ class Calibration:
 
 def mesh_laplacian(triangles, vertex_count):
     """Umbrella Laplacian L (V, V) CSR: (L c)_i = (1/|N(i)|) sum_{j in N(i)} (c_i - c_j)."""
-    f = np.asarray(triangles)
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    e = np.unique(np.sort(e, 1), axis=0)
+    e = unique_edges(triangles)[0]
     A = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
                       shape=(vertex_count, vertex_count)).tocsr()
     deg = np.maximum(np.asarray(A.sum(1)).ravel(), 1)

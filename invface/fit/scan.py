@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvfaceError
-from ..mesh.closest import closest_points
+from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.triangles import boundary_vertices, face_normals
 from ..model.rig import euler_xyz, euler_xyz_derivatives
 from .dogleg import dogleg
@@ -137,7 +137,7 @@ def _closest(V, F, points, border=None):
     triangles (N,) and barycentrics (N,3), and whether each lies on an open boundary edge
     (N,) (``border``: boolean (n,) of the mesh's boundary vertices)."""
     tri, bary, _ = closest_points(points, V, F)
-    q = np.einsum("nk,nkj->nj", bary, V[F[tri]])
+    q = barycentric_points(V, F, tri, bary)
     n = face_normals(V, F[tri])
     edge = np.zeros(len(points), bool) if border is None else (border[F[tri]] | (bary < 1e-9)).all(1)
     return q, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30), tri, bary, edge

@@ -41,6 +41,12 @@ def closest_on_triangles(p, a, b, c):
     return w
 
 
+def barycentric_points(values, F, tri, w):
+    """Per-vertex values (n, d) (positions, normals) interpolated in the triangles ``tri``
+    (m,) of faces F at barycentric weights w (m, 3): (m, d)."""
+    return np.einsum("nk,nkj->nj", w, np.asarray(values)[np.asarray(F)[tri]])
+
+
 def closest_points(points, V, F, k=16):
     """Closest points on the mesh (V (n,3), F (f,3)) to points (P,3).
 

@@ -5,15 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
-def unique_edges(F):
-    """Unique undirected edges (E,2) of triangles F (F,3) and, per triangle, its 3 edge ids
-    (F,3) in the order (v0v1, v1v2, v2v0)."""
-    F = np.asarray(F, np.int64)
-    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    e.sort(axis=1)
-    edges, inv = np.unique(e, axis=0, return_inverse=True)
-    return edges, inv.reshape(3, len(F)).T
+from .triangles import unique_edges
 
 
 @dataclass
@@ -69,32 +61,37 @@ def plane_sections(V, F, origin, normal):
     tn = node[tri_edges]                                   # (F,3) node per triangle edge or -1
     hit = (tn >= 0).sum(1) == 2
     pair = np.sort(tn[hit], axis=1)[:, 1:]                 # the two non-negative entries
-    adj = [[] for _ in range(len(cross_ids))]
-    for a, b in pair:
+    chains = [Section(pts[np.r_[c, c[:1]] if closed else c], closed)
+              for c, closed in walk_chains(pair, len(cross_ids))]
+    chains.sort(key=lambda c: -c.length)
+    return chains
+
+
+def walk_chains(pairs, n):
+    """The ordered chains through n nodes joined by the pairs (E,2): a list of (node ids (k,),
+    closed). Open chains come first, each walked from an end (a degree-1 node); what remains
+    is walked as closed loops (the first node is not repeated). At a node of degree 3 or more
+    the walk takes the first unvisited neighbour."""
+    adj = [[] for _ in range(n)]
+    for a, b in pairs:
         adj[a].append(b)
         adj[b].append(a)
-    seen = np.zeros(len(cross_ids), bool)
+    seen = np.zeros(n, bool)
     chains = []
-    # open chains start at degree-1 nodes; what remains is closed loops
-    starts = [i for i in range(len(adj)) if len(adj[i]) == 1] + list(range(len(adj)))
+    starts = [i for i in range(n) if len(adj[i]) == 1] + list(range(n))
     for s in starts:
         if seen[s]:
             continue
         chain, prev, cur = [s], -1, s
         seen[s] = True
         while True:
-            nxt = [n for n in adj[cur] if n != prev and not seen[n]]
+            nxt = [k for k in adj[cur] if k != prev and not seen[k]]
             if not nxt:
                 break
             prev, cur = cur, nxt[0]
             seen[cur] = True
             chain.append(cur)
-        closed = len(chain) > 2 and chain[0] in adj[chain[-1]]
-        if closed:
-            chain.append(chain[0])
-        c = np.array(chain)
-        chains.append(Section(pts[c], closed))
-    chains.sort(key=lambda c: -c.length)
+        chains.append((np.array(chain), len(chain) > 2 and chain[0] in adj[chain[-1]]))
     return chains
 
 

@@ -29,12 +29,27 @@ def vertex_normals(X, faces, n_vertices=None):
     return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
 
 
+def unique_edges(F):
+    """Unique undirected edges (E,2) of triangles F (F,3) and, per triangle, its 3 edge ids
+    (F,3) in the order (v0v1, v1v2, v2v0)."""
+    F = np.asarray(F, np.int64)
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    e.sort(axis=1)
+    edges, inv = np.unique(e, axis=0, return_inverse=True)
+    return edges, inv.reshape(3, len(F)).T
+
+
+def edge_components(edges, n):
+    """Connected-component label (n,) of each of n nodes joined by the edges (E,2)."""
+    e = np.asarray(edges, np.int64).reshape(-1, 2)
+    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return connected_components(g, directed=False)[1]
+
+
 def boundary_edges(faces):
     """Edges (B,2) used by a single triangle of ``faces`` (F,3): the open boundaries."""
-    F = np.asarray(faces, np.int64)
-    e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    u, c = np.unique(e, axis=0, return_counts=True)
-    return u[c == 1]
+    edges, tri_edges = unique_edges(faces)
+    return edges[np.bincount(tri_edges.ravel(), minlength=len(edges)) == 1]
 
 
 def boundary_vertices(faces, n):
@@ -51,8 +66,5 @@ def boundary_loops(faces):
     if len(b) == 0:
         return []
     ids, local = np.unique(b, return_inverse=True)
-    local = local.reshape(-1, 2)
-    n = len(ids)
-    g = coo_matrix((np.ones(len(local)), (local[:, 0], local[:, 1])), shape=(n, n))
-    k, lab = connected_components(g, directed=False)
-    return [ids[lab == i] for i in range(k)]
+    lab = edge_components(local, len(ids))
+    return [ids[lab == i] for i in range(lab.max() + 1)]

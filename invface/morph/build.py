@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, MeshError
-from ..mesh.closest import closest_points
+from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.meshfile import read_mesh
 from ..mesh.tets import locate, quality_summary
 from ..model.facemodel import FaceModel
@@ -183,7 +183,7 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     lap("tracks")
 
     tri, bw, _ = closest_points(np.array([TL[k] for k in TL]), template.neutral, template.triangles)
-    on_model = dict(zip(TL, np.einsum("nk,nkj->nj", bw, model.neutral[template.triangles[tri]])))
+    on_model = dict(zip(TL, barycentric_points(model.neutral, template.triangles, tri, bw)))
     dist = closest_points(model.neutral[surf.snapped], Va, Fg)[2]
     q = quality_summary(X1, tets)
     stats = {

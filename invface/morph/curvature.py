@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh.closest import closest_points
+from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.triangles import vertex_normals
 
 STENCIL_RADIUS = 0.005   # m (the paper's 0.005 units, its models being in metres)
@@ -36,7 +36,7 @@ def stencil_curvature(V, F, ids=None, radius=STENCIL_RADIUS, n_points=STENCIL_PO
     v = V[ids]
     q = v[:, None] + radius * dirs                                        # (P,8,3)
     tri, w, _ = closest_points(q.reshape(-1, 3), V, F)
-    p = np.einsum("nk,nkj->nj", w, V[F[tri]]).reshape(len(ids), n_points, 3)
+    p = barycentric_points(V, F, tri, w).reshape(len(ids), n_points, 3)
     d = p - v[:, None]
     dn = np.einsum("pkj,pj->pk", d, n)
     kappa = -2 * dn / np.maximum((d ** 2).sum(2), 1e-30)                 # convex positive

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh.closest import closest_points
+from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.sections import arc_length, plane_sections, resample_even
 from ..mesh.triangles import vertex_normals
 
@@ -40,7 +40,7 @@ SNAP_TOL = 0.003         # m: a section must pass this close to both landmarks
 
 def _project(V, F, P):
     tri, w, _ = closest_points(P, V, F)
-    return np.einsum("nk,nkj->nj", w, V[F[tri]])
+    return barycentric_points(V, F, tri, w)
 
 
 def landmark_curve(V, F, a, b, normals_at=None):

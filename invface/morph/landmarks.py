@@ -32,7 +32,7 @@ from scipy.signal import find_peaks
 from scipy.spatial import cKDTree
 
 from ..errors import MeshError
-from ..mesh.closest import closest_points
+from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.sections import plane_sections
 from ..mesh.triangles import boundary_loops
 from ..template.features import profile_concavity
@@ -110,7 +110,7 @@ def _register_patch(model, vid, V, F, A, t):
     R, t, _ = rigid_icp(P, V, F, A, t, iters=30, weights=w)
     q = R @ model.neutral[vid] + t
     tri, bw, _ = closest_points(q[None], V, F)
-    return np.einsum("k,kj->j", bw[0], V[F[tri[0]]])
+    return barycentric_points(V, F, tri, bw)[0]
 
 
 def _opening(V, loops, center, radius):
@@ -189,7 +189,7 @@ def find_landmarks(V, F, model):
     prior = {k: A @ model.neutral[v] + t for k, v in model.landmarks.items() if k in LANDMARKS}
     # priors carried onto the target surface
     tri, w, _ = closest_points(np.array(list(prior.values())), V, F)
-    prior = dict(zip(prior, np.einsum("nk,nkj->nj", w, V[F[tri]])))
+    prior = dict(zip(prior, barycentric_points(V, F, tri, w)))
     P = profile_curve(V, F, prior["nose_tip"])
     y, z = P[:, 1], P[:, 2]
     idx = np.arange(len(P))

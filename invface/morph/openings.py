@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh.sections import arc_length, resample
+from ..mesh.sections import arc_length, resample, walk_chains
 from ..mesh.triangles import boundary_edges
 
 # the openings and the landmarks at their ends
@@ -28,30 +28,11 @@ CORNER_TOL = 0.003      # m: a loop belongs to an opening when it passes this cl
 def ordered_loops(faces):
     """The open boundaries of a triangle mesh as ordered cycles: a list of vertex-id arrays
     (each loop once round, no repeat); boundaries that are not simple cycles are left out."""
-    b = boundary_edges(faces)
-    nxt = {}
-    for i, j in b:
-        nxt.setdefault(int(i), []).append(int(j))
-        nxt.setdefault(int(j), []).append(int(i))
-    seen, loops = set(), []
-    for start in nxt:
-        if start in seen or len(nxt[start]) != 2:
-            continue
-        loop, prev, cur = [start], None, start
-        while True:
-            seen.add(cur)
-            nb = nxt[cur]
-            if len(nb) != 2:
-                loop = None
-                break
-            step = nb[0] if nb[0] != prev else nb[1]
-            if step == start:
-                break
-            prev, cur = cur, step
-            loop.append(cur)
-        if loop is not None and len(loop) >= 6:
-            loops.append(np.array(loop))
-    return loops
+    ids, local = np.unique(boundary_edges(faces), return_inverse=True)
+    local = local.reshape(-1, 2)
+    degree = np.bincount(local.ravel(), minlength=len(ids))
+    return [ids[c] for c, closed in walk_chains(local, len(ids))
+            if closed and len(c) >= 6 and (degree[c] == 2).all()]
 
 
 def _side_height(V, F, half):

@@ -25,7 +25,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ..errors import MeshError
-from ..mesh.closest import closest_points
+from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.sections import arc_length, plane_sections, resample
 from ..mesh.triangles import triangle_areas
 
@@ -211,7 +211,7 @@ def rigid_icp(P, V, F, R, t, iters=20, trim=2.5, weights=None, scale=False):
         tri, w, d = closest_points(Q, V, F)
         med = float(np.median(d))
         keep = d <= trim * med + 1e-9
-        C = np.einsum("nk,nkj->nj", w, V[F[tri]])
+        C = barycentric_points(V, F, tri, w)
         dR, dt = _kabsch(Q[keep], C[keep], weights[keep], scale)
         R, t = dR @ R, dR @ t + dt
         if np.linalg.norm(dR - np.eye(3)) < 1e-6 and np.linalg.norm(dt) < 1e-7:

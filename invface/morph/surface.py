@@ -33,10 +33,10 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 from scipy.spatial import cKDTree
 
-from ..mesh.closest import closest_points
-from ..mesh.sections import point_to_polyline, unique_edges
+from ..mesh.closest import barycentric_points, closest_points
+from ..mesh.sections import arc_length, point_to_polyline
 from ..mesh.tets import graph_laplacian, harmonic
-from ..mesh.triangles import boundary_vertices, face_normals, triangle_areas, vertex_normals
+from ..mesh.triangles import boundary_vertices, face_normals, triangle_areas, unique_edges, vertex_normals
 
 SNAP_DISTANCE = 0.01          # m: farther template vertices are "off the scan" (sec. 8.1)
 
@@ -104,8 +104,7 @@ def curve_dirichlet(V, curves_t, curves_g, tol):
         s, d = point_to_polyline(V[cand], Ct)
         ok = d <= tol
         cand, s = cand[ok], s[ok]
-        st = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(Ct, axis=0), axis=1))])
-        u = s / max(st[-1], 1e-12) * (len(Ct) - 1)
+        u = s / max(arc_length(Ct)[-1], 1e-12) * (len(Ct) - 1)
         k = np.clip(np.floor(u).astype(int), 0, len(Ct) - 2)
         f = (u - k)[:, None]
         disp = (1 - f) * (Cg[k] - Ct[k]) + f * (Cg[k + 1] - Ct[k + 1])
@@ -115,10 +114,6 @@ def curve_dirichlet(V, curves_t, curves_g, tol):
     return ids, acc[ids] / cnt[ids, None]
 
 
-def _bary_point(V, F, tri, w):
-    return np.einsum("nk,nkj->nj", w, V[F[tri]])
-
-
 def snap(Vm, Ft, Vg, Fg, normals=None, max_distance=SNAP_DISTANCE):
     """Snap the morphed template (Vm (n,3), Ft) onto the target (Vg, Fg) via the target
     projected onto the template (Fig. 10c-d). Returns snapped positions (n,3) and a mask (n,)
@@ -126,17 +121,17 @@ def snap(Vm, Ft, Vg, Fg, normals=None, max_distance=SNAP_DISTANCE):
     vertex's target triangle (n,) and barycentric weights (n,3)."""
     # 1. the target onto the morphed template
     tri, w, dist = closest_points(Vg, Vm, Ft)
-    Vproj = _bary_point(Vm, Ft, tri, w)
+    Vproj = barycentric_points(Vm, Ft, tri, w)
     # target triangles facing away from the template where they project (the walls of
     # nostrils and other cavities, which the paper's shrink-wrapped target does not have)
     # are not snapped onto
     Nt = vertex_normals(Vm, Ft) if normals is None else normals
-    facing = np.einsum("ij,ij->i", vertex_normals(Vg, Fg), _bary_point(Nt, Ft, tri, w)) > 0
+    facing = np.einsum("ij,ij->i", vertex_normals(Vg, Fg), barycentric_points(Nt, Ft, tri, w)) > 0
     keep = np.flatnonzero(facing[Fg].all(1))
     Fg = Fg[keep]
     # 2. each template vertex located in the projected target, mapped to the real target
     tri2, w2, d2 = closest_points(Vm, Vproj, Fg)
-    snapped = _bary_point(Vg, Fg, tri2, w2)
+    snapped = barycentric_points(Vg, Fg, tri2, w2)
     on_edge = boundary_vertices(Fg, len(Vg))[Fg[tri2]]
     at_border = (on_edge & (w2 > 1e-6)).sum(1) >= 2       # on a target boundary edge
     # a target triangle whose vertices projected far (behind, across a hole) is unreliable
@@ -150,7 +145,7 @@ def inverted_triangles(Vs, Ft, Vg, Fg):
     at their centroid (the paper's level-set normal test)."""
     fn = face_normals(Vs, Ft)
     tri, w, _ = closest_points(Vs[Ft].mean(1), Vg, Fg)
-    gn = np.einsum("nk,nkj->nj", w, vertex_normals(Vg, Fg)[Fg[tri]])
+    gn = barycentric_points(vertex_normals(Vg, Fg), Fg, tri, w)
     return np.einsum("ij,ij->i", fn, gn) < 0
 
 

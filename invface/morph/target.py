@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import MeshError
-from ..mesh.triangles import face_normals, triangle_areas
+from ..mesh.triangles import edge_components, face_normals, triangle_areas
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 HEAD_SIZE_M = (0.12, 0.6)        # bounding-box diagonal of a face or head, metres
@@ -44,14 +44,6 @@ def detect_unit(V, name="target"):
     raise MeshError(f"{name}: its bounding box is {diag:.4g} units across, which is no head size in "
                     f"metres, centimetres or millimetres ({HEAD_SIZE_M[0]}-{HEAD_SIZE_M[1]} m); "
                     "pass the unit explicitly (--unit) or rescale the file")
-
-
-def _components(F, n):
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import connected_components
-    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]]])
-    A = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    return connected_components(A, directed=False)[1]
 
 
 def clean(V, F, name="target", unit=None):
@@ -91,7 +83,7 @@ def clean(V, F, name="target", unit=None):
     if len(F) < MIN_TRIANGLES:
         raise MeshError(f"{name}: only {len(F)} usable triangles; a face scan needs at least {MIN_TRIANGLES}")
     # keep the largest connected piece (stray bits of hair, eyeballs, scanning debris)
-    comp = _components(F, len(V))
+    comp = edge_components(F[:, [0, 1, 1, 2]], len(V))
     tri_comp = comp[F[:, 0]]
     big = np.bincount(tri_comp).argmax()
     if (tri_comp != big).any():

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import MeshError
-from ..mesh.closest import closest_points
+from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.tets import (barycentric, boundary_faces, harmonic, laplacian, locate,
                          radius_ratio, shape_gradients, signed_volumes)
 from ..mesh.triangles import vertex_normals
@@ -48,8 +48,8 @@ class VolumeMorph:
 def _depth(points, V, F):
     """Signed depth (P,) of points below the skin (V, F): positive inside."""
     tri, w, d = closest_points(points, V, F)
-    q = np.einsum("nk,nkj->nj", w, V[F[tri]])
-    n = np.einsum("nk,nkj->nj", w, vertex_normals(V, F)[F[tri]])
+    q = barycentric_points(V, F, tri, w)
+    n = barycentric_points(vertex_normals(V, F), F, tri, w)
     return np.where(np.einsum("ij,ij->i", points - q, n) > 0, -d, d), n
 
 
