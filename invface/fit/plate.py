@@ -19,16 +19,15 @@ camera set-up.
 from __future__ import annotations
 
 import json
-import os
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from ..errors import ImageError, InvfaceError
 from ..sim.quasistatic import SimulationError
 from .curves import LAMBDA_1, CurveObjective, fit_curves, projection_jacobian, rms_px
+from .results import write_fit_files
 from .scan import posed_surface
 from .shading import fit_shading
 
@@ -152,24 +151,10 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
                     lip_volume_change=lip_volume_change(model, p, X), status=status)
 
 
-def _json_safe(o):
-    if isinstance(o, dict):
-        return {k: _json_safe(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_json_safe(v) for v in o]
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, float) and not np.isfinite(o):
-        return None
-    return o
-
-
 def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=None):
     """Write ``fit.json`` (summary) and ``fit.npz`` (plate, render, posed surface, curves,
     camera, and the per-vertex error (V,) m against a truth when given) into ``folder``
     atomically; the report (``invface.report.fit``) reads them."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     summary = dict(fit.summary(model), plate=str(plate.path), **(extra or {}))
     names = sorted(curves)
     arrays = {"plate": plate.image.astype(np.float32), "render": fit.render.astype(np.float32),
@@ -184,13 +169,7 @@ def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=
     for i, n in enumerate(names):
         arrays[f"curve_{i}"] = np.asarray(curves[n], float)
         arrays[f"model_curve_{i}"] = projection_jacobian(plate.camera, fit.surface[model.curves[n]])[0]
-    tmp = folder / "fit.npz.tmp.npz"
-    np.savez_compressed(tmp, **arrays)
-    os.replace(tmp, folder / "fit.npz")
-    tmp = folder / "fit.json.tmp"
-    tmp.write_text(json.dumps(_json_safe(summary), indent=1))
-    os.replace(tmp, folder / "fit.json")
-    return folder / "fit.json"
+    return write_fit_files(folder, summary, arrays)
 
 
 def read_truth(path, model):

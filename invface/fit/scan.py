@@ -21,10 +21,7 @@ Two correspondence modes:
 """
 from __future__ import annotations
 
-import json
-import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -33,6 +30,7 @@ from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.triangles import boundary_vertices, face_normals
 from ..model.rig import euler_xyz, euler_xyz_derivatives
 from .dogleg import dogleg
+from .results import write_fit_files
 
 LAMBDA = 1e-6          # paper 000, Eq. 13
 
@@ -215,14 +213,7 @@ def write_scan_fit(folder, model, fit, **extra):
     """Write ``fit.json`` (the fit's summary, its history and ``extra``) and ``fit.npz``
     (posed surface, neutral, per-vertex error (V,) m, controls) into ``folder``, each through
     a temporary file; the report (``invface.report.fit``) reads them. Returns the summary."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     summary = dict(fit.summary(model), history=fit.history, **extra)
-    tmp = folder / "fit.json.tmp"
-    tmp.write_text(json.dumps(summary, indent=1))
-    os.replace(tmp, folder / "fit.json")
-    tmp = folder / "fit.npz.tmp.npz"
-    np.savez_compressed(tmp, surface=fit.surface, triangles=model.triangles, neutral=model.neutral,
-                        vertex_error=fit.error, p=fit.p)
-    os.replace(tmp, folder / "fit.npz")
+    write_fit_files(folder, summary, dict(surface=fit.surface, triangles=model.triangles,
+                                          neutral=model.neutral, vertex_error=fit.error, p=fit.p))
     return summary

@@ -1,14 +1,15 @@
 """HTML reports of plate and scan fits: ``write_report(run_folder)``.
 
-A run folder holds one fit (``fit.json`` + ``fit.npz``, written by ``fit.plate.write_plate_fit``
-or ``fit.scan``'s CLI) or several, one per sub-folder (the model kinds of one plate). The page
-``index.html`` shows, per fit: plate, render, a wipe (left plate, right render), the
+A run folder holds one fit (``fit.json`` + ``fit.npz``, written by
+``fit.results.write_fit_files`` for ``fit.plate.write_plate_fit`` and
+``fit.scan.write_scan_fit``) or several, one per sub-folder (the model kinds of one plate). The
+page ``index.html`` shows, per fit: plate, render, a wipe (left plate, right render), the
 per-pixel error heat map, the plate curves (green) and projected model curves (red), the 3D
-error heat map on the mesh (vertex error against a known truth, or the scan distance; else
-the motion from the neutral), bar charts of blendshape weights and muscle activations,
-the convergence plot, timings and all parameters as JSON; and a comparison table of the
-fits (vertex error, lip-region volume change, non-zero controls). Everything is a file next
-to the page: it works offline.
+error heat map on the mesh (vertex error against a known truth, or the scan distance; else the
+motion from the neutral), bar charts of blendshape weights and muscle activations, the
+convergence plot, timings and all parameters as JSON; and a comparison table of the fits
+(vertex error, lip-region volume change, non-zero controls). Everything is a file next to the
+page: it works offline.
 """
 from __future__ import annotations
 
