@@ -213,6 +213,37 @@ def test_geometry_gradients_include_silhouettes(grad_setup, small_model):
     assert abs(gx @ shift.ravel()) > 0.2 * abs(fd)
 
 
+def test_cropped_film_renders_the_window_with_its_silhouette_gradients(small_model):
+    """A renderer with ``crop`` gives the window of the full image and the same gradient of
+    a loss over that window (the silhouette samples land in film coordinates: before they
+    were put at window coordinates the gradient was 36 % off)."""
+    import drjit as dr
+    cam = Camera.front_view(160, 120)
+    V = small_model.neutral
+    plate = np.random.default_rng(0).uniform(0, 1, (120, 160, 3)).astype(np.float32)
+    x0, y0, w, h = crop = (48, 24, 64, 80)                    # cuts through the face
+    out = []
+    for c in (None, crop):
+        r = FaceRenderer(small_model.triangles, cam, spp=64, silhouette_spp=8, seed=3, backplate=plate, crop=c)
+        x = r.mi.Float(V.astype(np.float32).ravel())
+        dr.enable_grad(x)
+        img = r.render(x, _light(), np.full((len(V), 3), 0.6))
+        im = np.array(img)
+        wt = np.zeros(im.shape, np.float32)
+        if c is None:
+            wt[y0:y0 + h, x0:x0 + w, :3] = 1
+            im = im[y0:y0 + h, x0:x0 + w]
+        else:
+            wt[..., :3] = 1
+        dr.backward(img * r.mi.TensorXf(wt))
+        out.append((im, np.array(dr.grad(x), np.float64)))
+    (full, gf), (part, gc) = out
+    assert part.shape == (h, w, 4) and np.abs(part - full).mean() < 1e-3 * np.abs(full).mean()
+    assert np.linalg.norm(gc - gf) < 0.15 * np.linalg.norm(gf)
+    shift = np.tile([1.0, 0.3, 0.0], len(V))
+    assert gc @ shift == pytest.approx(gf @ shift, rel=0.03)
+
+
 def test_occlusion_gradient_of_a_sphere_in_front_of_another():
     import drjit as dr
     a, b = trimesh.creation.icosphere(4, 0.05), trimesh.creation.icosphere(4, 0.08)

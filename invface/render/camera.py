@@ -154,8 +154,9 @@ class Camera:
         uv = pc @ self.K.T
         return uv[:, :2] / z[:, None], z
 
-    def sensor_dict(self, spp=4, filter="box", sampler="independent"):
-        """Mitsuba ``perspective`` sensor dict with this camera's pose, focal and centre."""
+    def sensor_dict(self, spp=4, filter="box", sampler="independent", crop=None):
+        """Mitsuba ``perspective`` sensor dict with this camera's pose, focal and centre;
+        crop (x0, y0, width, height) px renders only that window of the film."""
         from .variant import mitsuba
         mi = mitsuba()
         w, h = self.size
@@ -176,5 +177,7 @@ class Camera:
             "to_world": mi.ScalarTransform4f(to_world.tolist()),
             "sampler": {"type": sampler, "sample_count": int(spp)},
             "film": {"type": "hdrfilm", "width": w, "height": h, "pixel_format": "rgba",
-                     "rfilter": {"type": filter}, "sample_border": True},
+                     "rfilter": {"type": filter}, "sample_border": True,
+                     **({} if crop is None else dict(zip(("crop_offset_x", "crop_offset_y", "crop_width",
+                                                           "crop_height"), (int(c) for c in crop))))},
         }

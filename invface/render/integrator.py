@@ -153,7 +153,8 @@ def register():
                 it.p = ss.p
                 ds, _ = sensor.sample_direction(it, mi.Point2f(0))
             block = film.create_block(normalize=True)
-            block.put(pos=ds.uv, wavelengths=wavelengths,
+            # ds.uv is relative to the film's crop window; the block takes film positions
+            block.put(pos=ds.uv + mi.Vector2f(film.crop_offset()), wavelengths=wavelengths,
                       value=dL * motion * dr.rcp(ss.pdf) * J * (pixels / count),
                       weight=0, alpha=1, active=active)
             film.put_block(block)

@@ -59,9 +59,12 @@ class FaceRenderer:
     give < 5 % gradient noise on the controls at 720x540 in < 1 s (bench/RESULTS.md).
     backplate: an optional linear image (H, W, 3) shown behind the face (the plate itself),
     so that silhouette derivatives see the plate's background rather than black: rays that
-    miss the face look the plate up (bilinearly) at their own pixel position."""
+    miss the face look the plate up (bilinearly) at their own pixel position.
+    crop: (x0, y0, width, height) px: render only that window of the camera's image (the
+    returned images are that size; the pixels keep the full image's rays)."""
 
-    def __init__(self, triangles, camera: Camera, spp=8, silhouette_spp=0.5, seed=0, backplate=None):
+    def __init__(self, triangles, camera: Camera, spp=8, silhouette_spp=0.5, seed=0, backplate=None,
+                 crop=None):
         if spp < 1:
             raise ConfigError(f"spp must be >= 1, got {spp}")
         if silhouette_spp < 0:
@@ -81,7 +84,7 @@ class FaceRenderer:
         mesh.add_attribute(ATTRIBUTE, 3, dr.zeros(mi.Float, 3 * self.vertex_count))
         self.faces = mi.UInt(tri.ravel())
         scene = {"type": "scene", "integrator": {"type": NAME, "sppi": 0},
-                 "sensor": camera.sensor_dict(spp=self.spp, sampler="multijitter"), "face": mesh}
+                 "sensor": camera.sensor_dict(spp=self.spp, sampler="multijitter", crop=crop), "face": mesh}
         self.scene = mi.load_dict(scene)
         self.params = mi.traverse(self.scene)
         self.params.keep(["face.vertex_positions", f"face.{ATTRIBUTE}"])
