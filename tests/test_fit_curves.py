@@ -81,6 +81,21 @@ def test_pose_from_curves(small_expressive_model):
     assert fit.rms_px < 1.0
 
 
+def test_pose_from_curves_of_a_smile(small_expressive_model):
+    """The tracking pass explains the smile by the controls, not the pose (one pass with
+    lambda_1 = 3600 left the smile's weights near 0.05 and the pitch 0.023 rad, the height
+    2.2 mm off)."""
+    m = small_expressive_model
+    cam = Camera.front_view(720, 540)
+    names = PLATE_CURVES + ("brow_L", "brow_R", "nose_base", "nose_bridge")
+    p = m.parameters({"lipCornerPull_L": 0.7, "lipCornerPull_R": 0.6, "jaw": [0.08, 0, 0, 0, 0, 0]})
+    fit = fit_curves(m, cam, _plate_curves(m, cam, names, p))
+    assert np.abs(fit.rotation - ROT).max() < 0.008 and np.abs(fit.translation - TR).max() < 1e-3
+    smile = [m.blendshape_names.index(n) for n in ("lipCornerPull_L", "lipCornerPull_R")]
+    assert np.all(fit.tracked[smile] > 0.4) and np.all(fit.p[smile] < fit.tracked[smile])
+    assert {h["pass"] for h in fit.history} == {"pose", "controls"}
+
+
 def test_curve_file_errors(small_expressive_model, tmp_path):
     m = small_expressive_model
     write_curves(tmp_path / "ok.json", {"eye_L_upper": [[1, 2], [3, 4]]}, image_size=(720, 540))
