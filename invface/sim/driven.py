@@ -12,6 +12,8 @@ Derivatives with respect to p are in sim.adjoint.
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,6 +68,7 @@ class DrivenSimulation:
         self.n_blendshapes = K
         self.W = embedding_matrix(model)
         self.last = None
+        self.start = "last"        # where new solves start: see result_at
 
     def split(self, p):
         """(b (K,), jaw (6,)) from a parameter vector p (K+6,); validates it."""
@@ -95,10 +98,25 @@ class DrivenSimulation:
         return self.surface_of(self.result_at(p))
 
     def result_at(self, p):
-        """The DrivenResult at p: the last one when p is unchanged, else a new (warm) solve."""
+        """The DrivenResult at p: the last one when p is unchanged, else a new solve, warm
+        from the last one (``start = "last"``), from rest (``"rest"``) or from one fixed
+        DrivenResult. With a fixed start the surface is a function of p alone; from the last
+        solve, contact planes and lip contacts depend on the path of earlier solves (up to
+        0.1 mm apart at the same p)."""
         if self.last is not None and np.array_equal(self.last.p, np.asarray(p, float).reshape(-1)):
             return self.last
-        return self.solve(p)
+        return self.solve(p, warm=None if isinstance(self.start, str) and self.start == "rest" else self.start)
+
+    @contextmanager
+    def starting_from(self, start):
+        """Context in which new solves start from ``start``: "last", "rest" or a DrivenResult."""
+        if not isinstance(start, DrivenResult) and start not in ("last", "rest"):
+            raise ValueError(f"start must be 'last', 'rest' or a DrivenResult, got {start!r}")
+        old, self.start = self.start, start
+        try:
+            yield self
+        finally:
+            self.start = old
 
     def sensitivity(self, p):
         """sim.adjoint.Sensitivity at p (reuses the last solve when p is unchanged)."""
