@@ -322,7 +322,7 @@ def plate_curves(model, plate, curves_path):
 
 
 def fit_plate_frame(model, plate, cal, curves, kinds, out, starts=None, iterations=25, shading=True,
-                    source="", title=None, lam_curves=3600.0, notes=()):
+                    source="", title=None, lam_curves=3600.0, notes=(), solver="dogleg"):
     """Fit one plate with each model kind, write out/<kind>/fit.{json,npz} and out/index.html;
     notes: lines for the report. Returns {kind: PlateFit}."""
     import numpy as np
@@ -343,10 +343,10 @@ def fit_plate_frame(model, plate, cal, curves, kinds, out, starts=None, iteratio
         try:
             fit = fit_plate(model, plate, cal, curves, kind=kind, start=(starts or {}).get(kind),
                             shading=shading, max_iter_shading=iterations, lam_curves=lam_curves,
-                            progress=progress)
+                            solver=solver, progress=progress)
         finally:
             bar.close()
-        extra = {"curves_from": source, "curve_lambda": lam_curves, "notes": list(notes)}
+        extra = {"curves_from": source, "curve_lambda": lam_curves, "solver": solver, "notes": list(notes)}
         if source == "landmark detector":
             extra["notes"].insert(0, "Curves from the automatic landmark detector (MediaPipe Face Landmarker); "
                                      "its face oval masks the shading term.")
@@ -395,7 +395,7 @@ def cmd_fit_plate(args):
         curves, source = plate_curves(model, plate, args.curves)
         folder = out / frame.stem if len(frames) > 1 else out
         starts = fit_plate_frame(model, plate, cal, curves, kinds, folder, starts, args.iterations,
-                                 not args.no_shading, source, lam_curves=args.curve_lambda)
+                                 not args.no_shading, source, lam_curves=args.curve_lambda, solver=args.solver)
     return 0
 
 
@@ -526,6 +526,9 @@ def build_parser():
     fp.add_argument("--model-kind", choices=["blendshape", "simulation", "both"], default="blendshape")
     fp.add_argument("--curve-lambda", type=float, default=3600.0, help=CURVE_LAMBDA_HELP)
     fp.add_argument("--iterations", type=int, default=25, help="shape-from-shading iterations at most")
+    fp.add_argument("--solver", choices=["dogleg", "lbfgs"], default="dogleg",
+                    help="shape-from-shading solver: the paper's dogleg (Gauss-Newton on forward-mode "
+                         "image Jacobians) or L-BFGS-B on adjoint gradients (for many controls)")
     fp.add_argument("--no-shading", action="store_true", help="curves only (Eq. 15)")
     fp.add_argument("-o", "--output", help="report folder (default reports/fit-plate/PLATE)")
     fp.set_defaults(func=cmd_fit_plate)

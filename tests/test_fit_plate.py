@@ -8,7 +8,7 @@ from invface.errors import ImageError, InvfaceError
 from invface.fit.calibrate import Calibration
 from invface.fit.curves import PLATE_CURVES, projection_jacobian
 from invface.fit.plate import fit_plate, read_truth, vertex_errors, write_plate_fit
-from invface.fit.scan import posed_surface
+from invface.fit.scan import posed_jacobian, posed_surface
 from invface.fit.shading import Pyramid, ShadingObjective
 from invface.render.camera import Camera
 from invface.render.plates import Plate
@@ -72,6 +72,31 @@ def test_shading_gradient_matches_finite_differences(small_expressive_model):
         assert grad[idx] == pytest.approx(fd, rel=rel), (idx, grad[idx], fd)
 
 
+def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_model):
+    """The dogleg's forward-mode image Jacobian: its columns applied to the residual give
+    the adjoint gradient of the same render, and their sizes match finite differences of
+    the residual (per pixel the sampled silhouettes make differences noisy)."""
+    m = small_expressive_model
+    cam, p, g, a, plate = _shading_scene(m)
+    P = len(p)
+    sm = m.surface_model("blendshape")
+    obj = ShadingObjective(m, sm, cam, plate, g, a, np.zeros(P), lam2=0.0, spp=16, silhouette_spp=4,
+                           jacobian_spp=16)
+    z = np.r_[p * 0.6, ROT, TR]
+    _, grad = obj(z)
+    xr, Jall = posed_jacobian(sm, z, P)
+    r = obj._render(xr)[2]
+    C = obj.image_jacobian(xr, Jall)
+    assert C.shape == (P + 6, len(r))
+    np.testing.assert_allclose(C.astype(np.float64) @ r, grad, rtol=1e-4, atol=1e-6 * np.abs(grad).max())
+    names = m.blendshape_names
+    for idx, h in ((names.index("lipCornerPull_L"), 0.02), (names.index("browInnerUp_L"), 0.05), (P + 3, 2e-4)):
+        d = np.zeros_like(z)
+        d[idx] = h
+        fd = (obj._render(posed_surface(sm, z + d, P)[1])[2] - obj._render(posed_surface(sm, z - d, P)[1])[2]) / (2 * h)
+        assert np.linalg.norm(C[idx]) == pytest.approx(np.linalg.norm(fd), rel=0.15), idx
+
+
 def test_shading_mask_restricts_the_data_term_and_its_gradient(small_expressive_model):
     """E_2 = G(M (F* - F)): an empty mask leaves no image term; the lower half's gradient
     matches finite differences."""
@@ -98,7 +123,8 @@ def test_shading_mask_restricts_the_data_term_and_its_gradient(small_expressive_
     assert grad[idx] == pytest.approx(fd, rel=0.05)
 
 
-def test_fit_plate_recovers_a_blendshape_plate(small_expressive_model, tmp_path):
+@pytest.mark.parametrize("solver", ["dogleg", "lbfgs"])
+def test_fit_plate_recovers_a_blendshape_plate(small_expressive_model, tmp_path, solver):
     m = small_expressive_model
     cam = _cam(200, 150)
     p, (x, xr) = _truth(m)
@@ -107,7 +133,7 @@ def test_fit_plate_recovers_a_blendshape_plate(small_expressive_model, tmp_path)
     curves = {n: projection_jacobian(cam, xr[m.curves[n]])[0] for n in PLATE_CURVES}
     plate = Plate(image=image, camera=cam, path="synthetic")
     cal = Calibration(gamma=g, albedo=a)
-    fit = fit_plate(m, plate, cal, curves, kind="blendshape", max_iter_shading=20)
+    fit = fit_plate(m, plate, cal, curves, kind="blendshape", max_iter_shading=20, solver=solver)
     stages = {h["stage"] for h in fit.history}
     assert stages == {"curves", "shading"}
     shading = [h["cost"] for h in fit.history if h["stage"] == "shading"]
@@ -124,6 +150,23 @@ def test_fit_plate_recovers_a_blendshape_plate(small_expressive_model, tmp_path)
     page = write_report(tmp_path).read_text()
     for pic in ("wipe.png", "error.png", "curves.png", "weights.png", "convergence.png", "mesh_error.png"):
         assert pic in page and (tmp_path / "blendshape" / pic).is_file()
+
+
+def test_fit_plate_with_the_simulation_recovers_a_simulation_plate(small_expressive_model):
+    """The simulation stage starts from the blendshape stage and ends nearer the truth."""
+    m = small_expressive_model
+    cam = _cam(200, 150)
+    p, (x, xr) = _truth(m, "simulation")
+    g, a = studio_light(), skin_albedo(m)
+    image, _ = render_plate(m, x, cam, g, a, ROT, TR, spp=32)
+    curves = {n: projection_jacobian(cam, xr[m.curves[n]])[0] for n in PLATE_CURVES}
+    plate = Plate(image=image, camera=cam, path="synthetic")
+    fit = fit_plate(m, plate, Calibration(gamma=g, albedo=a), curves, kind="simulation", max_iter_shading=15)
+    assert [s for s in dict.fromkeys(h["stage"] for h in fit.history)] == ["curves", "shading", "shading-simulation"]
+    sim = [h["cost"] for h in fit.history if h["stage"] == "shading-simulation"]
+    assert min(sim) <= sim[0] and fit.activations and max(fit.activations.values()) > 0.05
+    _, shape = vertex_errors(m, fit, xr, {"rotation": ROT, "translation": TR})
+    assert np.median(shape) < 0.5e-3
 
 
 def test_sample_plates_carry_their_truth(small_expressive_model, tmp_path):

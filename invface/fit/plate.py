@@ -7,11 +7,14 @@ sequence of frames, each warm-started from the previous one.
 Stages (``PlateFit.history`` logs each):
 
 1. curves, Eq. 15, always with the blendshape rig: it is only the start w^ of Eq. 16, and on
-   the default head the simulation's curve solve took 62 s against 3 s;
-2. shading, Eq. 16, with the blendshape rig;
+   the default head the simulation's curve solve took 62 s against 3 s; with the pose
+   found first by a tracking pass (``fit_curves``);
+2. shading, Eq. 16, by the dogleg (``fit.shading``) with the blendshape rig;
 3. for ``kind="simulation"``: shading again with the muscle simulation, from stage 2's
-   solution (a simulation evaluation costs ~5 s against ~1.3 s, and the two models share
-   their controls, so the cheap model does the long walk and the simulation the last steps).
+   solution. The two models share their controls, so the cheap one does the long walk
+   (stage 2 stops early, at a 2% decrease) and the simulation, whose evaluation costs a
+   Newton solve and for accepted steps its tangents (~2 s on the default head, on top of
+   the ~1 s render), the last steps.
 
 The calibration (gamma, albedo) comes from Eq. 14 on a neutral plate of the same actor and
 camera set-up.
@@ -83,13 +86,14 @@ def check_plate(plate, path=""):
 
 
 def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, shading=True,
-              max_iter_curves=200, max_iter_shading=25, max_iter_simulation=8, spp=8,
-              lam_curves=LAMBDA_1, progress=None):
+              max_iter_curves=200, max_iter_shading=25, spp=8,
+              lam_curves=LAMBDA_1, solver="dogleg", progress=None):
     """Fit one plate. plate: ``render.plates.Plate`` (linear, undistorted; its mask, if any,
     restricts the shading term); calibration: ``fit.calibrate.Calibration`` (gamma, albedo);
     curves: {name: (n, 2) px} plate curves; kind: "blendshape" or "simulation"; start: the
     previous frame's PlateFit (sequence mode: its controls and pose start this frame);
-    lam_curves: lambda_1 of Eq. 15 (px^2 per unit weight^2). Returns a PlateFit."""
+    lam_curves: lambda_1 of Eq. 15 (px^2 per unit weight^2); solver: "dogleg" or "lbfgs" for
+    the shading stages (``fit.shading.fit_shading``). Returns a PlateFit."""
     if kind not in ("blendshape", "simulation"):
         raise InvfaceError(f"unknown model kind '{kind}': use 'blendshape' or 'simulation'")
     check_plate(plate.image, plate.path)
@@ -108,13 +112,13 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     history = [dict(h, stage="curves") for h in cf.history]
     seconds = {"curves": time.perf_counter() - t0}
     p, rot, tr, status = cf.p, cf.rotation, cf.translation, f"curves: {cf.status}"
-    stages = [("shading", "blendshape", max_iter_shading)]
-    if kind == "simulation":
-        stages.append(("shading-simulation", "simulation", max_iter_simulation))
-    for stage, skind, iters in stages if shading else []:
+    # the blendshape stage only has to bring the simulation near: a looser stop there
+    stages = [("shading", "blendshape", 5e-3)] if kind == "blendshape" else \
+        [("shading", "blendshape", 2e-2), ("shading-simulation", "simulation", 1e-2)]
+    for stage, skind, ftol in stages if shading else []:
         t1 = time.perf_counter()
-        shade = dict(kind=skind, curves=curves, mask=plate.mask, max_iter=iters, spp=spp,
-                     progress=lambda h: say(dict(h, stage=stage)))
+        shade = dict(kind=skind, curves=curves, mask=plate.mask, max_iter=max_iter_shading, spp=spp,
+                     ftol=ftol, solver=solver, progress=lambda h: say(dict(h, stage=stage)))
         try:
             sf = fit_shading(model, cam, plate.image, calibration.gamma, calibration.albedo, cf.p, rot, tr,
                              p0=p, **shade)

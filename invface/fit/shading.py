@@ -13,13 +13,17 @@ derivatives see it. A plate mask M (the alpha channel, or the landmark detector'
 on a photo) restricts the data term to the face: E_2 = G(M * (F* - F)), so hair and
 background the model's scalp and neck happen to cover do not pull on the pose.
 
-The solver is the gradient path of the design: L-BFGS-B (box constraints on the controls) on
-the adjoint gradient. One evaluation is one render with its derivative pass (the image
-adjoint G^T G (F - F*) sent back through Dr.Jit to the posed vertices) and the model's
-Jacobian d x_R / dz (the rig's, or the simulation's tangent solves on the converged Newton
-factorisation), so its cost does not grow with the number of pixels per parameter the way
-a forward-mode Jacobian for the paper's dogleg does (33 renders per iteration). The renderer
-keeps one sample seed, so the objective is a deterministic function of z.
+Two solvers. The default is the paper's dogleg (``fit.dogleg``) on the Gauss-Newton normal
+equations: g = J^T r exactly, from one backward pass through the render (the image adjoint
+G^T M G M (F - F*) sent back through Dr.Jit to the posed vertices, then through the model's
+Jacobian d x_R / dz: the rig's, or the simulation's tangent solves on the converged Newton
+factorisation), and H = J^T J from the image Jacobian's columns, one forward-mode pass per
+parameter through a second, cheaper render (``jacobian_spp`` samples per pixel), each sent
+through G M. Both are computed only for accepted steps; a rejected trial costs one render.
+Only the face's window of the plate is rendered (``face_window``). The gradient-only path
+(L-BFGS-B on the adjoint gradient, one render and one backward pass per evaluation) is for
+parameter counts where P+6 forward passes are too many. The renderer keeps one sample seed,
+so the objective is a deterministic function of z.
 """
 from __future__ import annotations
 
@@ -28,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ImageError
+from ..errors import ImageError, InvfaceError
 from ..render.renderer import FaceRenderer
 from ..sim.quasistatic import SimulationError
 from .curves import CurveObjective
@@ -106,101 +110,264 @@ class ShadingFit:
 
 
 class ShadingObjective:
-    """z = (p, theta, t) -> (cost, gradient (P+6,)) of Eq. 16, one render and one backward."""
+    """Eq. 16 at z = (p, theta, t): ``__call__`` (cost, gradient (P+6,)) with one render and
+    one backward pass; ``normal_equations`` for the dogleg. window (x0, y0, width, height)
+    px: render and compare only that part of the plate (``face_window``); outside it the
+    render shows the plate itself, so the image term there is a constant."""
 
     def __init__(self, model, surface_model, camera, plate, gamma, albedo, p_hat, curves=None,
-                 lam1=LAMBDA_1, lam2=LAMBDA_2, mask=None, spp=8, silhouette_spp=0.5, seed=1):
+                 lam1=LAMBDA_1, lam2=LAMBDA_2, mask=None, spp=8, silhouette_spp=0.5, seed=1, window=None,
+                 jacobian_spp=2):
         import drjit as dr
         self.dr = dr
         self.model, self.sm = model, surface_model
         self.P = len(model.blendshape_names) + 6
-        self.plate = np.asarray(plate, np.float32)
-        if self.plate.shape[:2] != (camera.height, camera.width):
-            raise ImageError(f"plate is {self.plate.shape[1]}x{self.plate.shape[0]} px, the camera "
+        plate = np.asarray(plate, np.float32)
+        if plate.shape[:2] != (camera.height, camera.width):
+            raise ImageError(f"plate is {plate.shape[1]}x{plate.shape[0]} px, the camera "
                              f"is {camera.width}x{camera.height}")
-        self.G = Pyramid(camera.height, camera.width)
-        self.mask = (np.ones(self.plate.shape[:2] + (1,), np.float32) if mask is None
-                     else np.asarray(mask, np.float32).reshape(self.plate.shape[:2] + (1,)))
+        mask = (np.ones(plate.shape[:2], np.float32) if mask is None
+                else np.asarray(mask, np.float32).reshape(plate.shape[:2]))
+        x0, y0, w, h = (0, 0, camera.width, camera.height) if window is None else window
+        self.plate = plate[y0:y0 + h, x0:x0 + w]
+        self.mask = mask[y0:y0 + h, x0:x0 + w, None]
+        self.G = Pyramid(h, w)
         self.target = self.G(self.plate * self.mask)
         self.gamma, self.albedo = np.asarray(gamma, float), np.asarray(albedo, float)
         self.renderer = FaceRenderer(model.triangles, camera, spp=spp, silhouette_spp=silhouette_spp,
-                                     seed=seed, backplate=self.plate)
+                                     seed=seed, backplate=plate, crop=window)
         self.p_hat, self.lam1, self.lam2 = np.asarray(p_hat, float), lam1, lam2
+        self.jacobian_spp = int(jacobian_spp)
         self.curves = CurveObjective(model, surface_model, camera, curves, 0.0) if curves else None
         self.terms = {}
 
-    def __call__(self, z):
-        dr, mi = self.dr, self.renderer.mi
+    def _prior_and_curves(self, z, xr, Jall=None):
+        """Cost of the prior and curve terms at z (posed surface xr); with Jall also their
+        residual rows' Jacobians: (cost, rows (n,), J (n, P+6)), the rows scaled by the
+        square roots of the weights."""
         P = self.P
-        xr, Jall = posed_jacobian(self.sm, z, P)
+        rows = [np.sqrt(self.lam2) * (z[:P] - self.p_hat)]
+        jac = [np.sqrt(self.lam2) * np.eye(P, P + 6)] if Jall is not None else None
+        if self.curves is not None:
+            if Jall is None:
+                rows += [np.sqrt(self.lam1) * np.linalg.norm(d, axis=1) for d in self.curves.residuals(xr).values()]
+            else:
+                rc, Jc = self.curves.rows(xr, Jall)
+                rows += [np.sqrt(self.lam1) * r for r in rc]
+                jac += [np.sqrt(self.lam1) * J for J in Jc]
+        r = np.concatenate(rows)
+        n = P
+        self.terms = {"prior": 0.5 * float(r[:n] @ r[:n]), "curves": 0.5 * float(r[n:] @ r[n:])}
+        return 0.5 * float(r @ r), r, (None if jac is None else np.vstack(jac))
+
+    def _render(self, xr):
+        """Render the posed surface (V, 3) with gradients on: (Dr.Jit positions, image,
+        image residual r = G M (F - F*) (m,))."""
+        dr, mi = self.dr, self.renderer.mi
         x = mi.Float(xr.astype(np.float32).ravel())
         dr.enable_grad(x)
         img = self.renderer.render(x, self.gamma, self.albedo)
         rgb = np.array(img, np.float32)[..., :3]
-        r = self.G(rgb * self.mask) - self.target                  # G M (F - F*)
-        adj = np.zeros(rgb.shape[:2] + (4,), np.float32)
+        r = self.G(rgb * self.mask) - self.target
+        self.terms = {"image": 0.5 * float(r @ r)}
+        return x, img, r
+
+    def __call__(self, z):
+        """(cost, gradient (P+6,)): one render and one backward pass."""
+        dr, mi = self.dr, self.renderer.mi
+        xr, Jall = posed_jacobian(self.sm, z, self.P)
+        x, img, r = self._render(xr)
+        image = self.terms["image"]
+        adj = np.zeros((self.plate.shape[0], self.plate.shape[1], 4), np.float32)
         adj[..., :3] = self.G.adjoint(r) * self.mask
         dr.backward(img * mi.TensorXf(adj))
-        gx = np.array(dr.grad(x), np.float64).reshape(-1, 3)
-        grad = np.einsum("kvi,vi->k", Jall, gx)
-        image = 0.5 * float(r @ r)
-        dp = z[:P] - self.p_hat
-        prior = 0.5 * self.lam2 * float(dp @ dp)
-        grad[:P] += self.lam2 * dp
-        curve = 0.0
-        if self.curves is not None:
-            rc, Jc = self.curves(z)
-            n = len(rc) - P                                       # without its zero regulariser rows
-            curve = 0.5 * self.lam1 * float(rc[:n] @ rc[:n])
-            grad += self.lam1 * (rc[:n] @ Jc[:n])
-        self.terms = {"image": image, "curves": curve, "prior": prior}
-        return image + curve + prior, grad
+        grad = np.einsum("kvi,vi->k", Jall, np.array(dr.grad(x), np.float64).reshape(-1, 3))
+        rest, rr, Jr = self._prior_and_curves(z, xr, Jall)
+        self.terms["image"] = image
+        return image + rest, grad + rr @ Jr
+
+    def normal_equations(self, z):
+        """Gauss-Newton pieces of Eq. 16 at z, for the dogleg: a lazy ``NormalEquations``.
+
+        The cost needs one render (and, for the simulation, one solve). Its derivatives,
+        asked for only when the dogleg accepts z, need d x_R / dz (the rig's, or the
+        simulation's tangent solves) and one forward-mode pass through the recorded render
+        per parameter through a render at ``jacobian_spp`` (~0.025 s each at 2 spp on a
+        460x540 window, silhouettes included), each sent through G M: H = J^T J, while
+        g = J^T r comes from the backward pass of the full-quality render."""
+        from .dogleg import NormalEquations
+        from .scan import posed_surface
+        dr = self.dr
+        P = self.P
+        _, xr = posed_surface(self.sm, z, P)
+        x, img, r = self._render(xr)
+        image = self.terms["image"]
+        rest, _, _ = self._prior_and_curves(z, xr)
+        terms = dict(self.terms, image=image)
+        self.terms = terms
+
+        def derivatives():
+            mi = self.renderer.mi
+            xr2, Jall = posed_jacobian(self.sm, z, P)
+            # the gradient: the exact adjoint of this render
+            adj = np.zeros(self.plate.shape[:2] + (4,), np.float32)
+            adj[..., :3] = self.G.adjoint(r) * self.mask
+            dr.backward(img * mi.TensorXf(adj))
+            g = np.einsum("kvi,vi->k", Jall, np.array(dr.grad(x), np.float64).reshape(-1, 3))
+            # the curvature: the image Jacobian from a render with fewer samples
+            C = self.image_jacobian(xr2, Jall)
+            _, rr, Jr = self._prior_and_curves(z, xr2, Jall)
+            self.terms = terms
+            return g + rr @ Jr, (C @ C.T).astype(np.float64) + Jr.T @ Jr
+
+        return NormalEquations(image + rest, derivatives=derivatives)
+
+    def image_jacobian(self, xr, Jall, spp=None):
+        """J^T of the image residual r = G M (F - F*): (P+6, m) float32, one row per
+        parameter, each a forward-mode pass through one render of the posed surface xr
+        (V, 3) at ``spp`` (default ``jacobian_spp``) samples per pixel, seeded as the
+        objective's renders, along d xr / dz_k = Jall[k] (V, 3)."""
+        dr, mi = self.dr, self.renderer.mi
+        C = np.empty((len(Jall), len(self.target)), np.float32)
+        with _forward_mode(dr):
+            x = mi.Float(xr.astype(np.float32).ravel())
+            dr.enable_grad(x)
+            img = self.renderer.render(x, self.gamma, self.albedo, spp=spp or self.jacobian_spp)
+            for k in range(len(Jall)):
+                dr.set_grad(x, mi.Float(Jall[k].astype(np.float32).ravel()))
+                dr.enqueue(dr.ADMode.Forward, x)
+                dr.traverse(dr.ADMode.Forward, flags=dr.ADFlag.ClearInterior)
+                C[k] = self.G(np.array(dr.grad(img), np.float32)[..., :3] * self.mask)
+                dr.clear_grad(img)
+        return C
 
 
-# one unit of the optimiser's variables: weights 1, jaw rotations 0.1 rad, jaw translations
-# and the head translation 1 cm, head rotation 0.1 rad (balances L-BFGS's first steps)
+class _forward_mode:
+    """Dr.Jit settings under which a recorded render can be differentiated forwards again
+    and again: loops, calls and conditionals evaluated, not recorded symbolically."""
+
+    def __init__(self, dr):
+        self.scopes = [dr.scoped_set_flag(f, False) for f in
+                       (dr.JitFlag.SymbolicLoops, dr.JitFlag.SymbolicCalls, dr.JitFlag.SymbolicConditionals)]
+
+    def __enter__(self):
+        for sc in self.scopes:
+            sc.__enter__()
+
+    def __exit__(self, *exc):
+        for sc in reversed(self.scopes):
+            sc.__exit__(*exc)
+
+
+def face_window(camera, xr, margin=0.15, align=1 << (LEVELS - 1)):
+    """(x0, y0, width, height) px: the bounding box of the posed surface xr (V, 3) in the
+    camera's image, grown by ``margin`` of its size (+8 px) on every side for the motion of
+    a fit, clipped to the image, corners on multiples of ``align`` (the pyramid's levels
+    then sample the same pixels as on the whole plate)."""
+    uv, _ = camera.project(xr)
+    lo, hi = uv.min(0), uv.max(0)
+    pad = margin * (hi - lo).max() + 8
+    size = np.array(camera.size)
+    a = np.clip(np.floor((lo - pad) / align) * align, 0, size).astype(int)
+    b = np.clip(np.ceil((hi + pad) / align) * align, 0, size).astype(int)
+    if np.any(b - a < 2 * align):
+        return 0, 0, int(size[0]), int(size[1])
+    return int(a[0]), int(a[1]), int(b[0] - a[0]), int(b[1] - a[1])
+
+
 def _scales(P):
-    s = np.ones(P + 6)
-    s[P - 6:P - 3], s[P - 3:P] = 0.1, 0.01
-    s[P:P + 3], s[P + 3:] = 0.1, 0.01
+    """One unit of the optimiser's variables: weights 0.1, jaw rotations 0.01 rad, jaw
+    translations and the head translation 1 mm, head rotation 0.01 rad. The balance evens
+    out L-BFGS's curvature; the size sets its first trial step, a unit step (a weight by
+    1 or the head by 0.1 rad overshot to costs 10-15x the start's)."""
+    s = np.full(P + 6, 0.1)
+    s[P - 6:P - 3], s[P - 3:P] = 0.01, 0.001
+    s[P:P + 3], s[P + 3:] = 0.01, 0.001
     return s
 
 
 def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translation, kind="blendshape",
-                curves=None, lam1=LAMBDA_1, lam2=LAMBDA_2, mask=None, max_iter=40, p0=None, restarts=2,
-                progress=None, **render):
+                curves=None, lam1=LAMBDA_1, lam2=LAMBDA_2, mask=None, max_iter=25, p0=None,
+                solver="dogleg", ftol=5e-3, restarts=2, progress=None, **render):
     """Solve Eq. 16 from the curve solution (p_hat (P,), rotation (3,), translation (3,)), or
     from p0 (P,) when given (p_hat stays the prior's centre).
 
     plate: linear (H, W, 3) float, undistorted, the camera's size; gamma (9, 3), albedo (V, 3)
     from the calibration; curves: the plate curves of Eq. 15 or None; mask (H, W) bool or None:
-    the plate pixels of the data term. ``render`` options go to
-    ``FaceRenderer`` (spp, silhouette_spp, seed). Returns a ShadingFit."""
-    from scipy.optimize import minimize
+    the plate pixels of the data term. solver: "dogleg" (the paper's: Gauss-Newton on the
+    image Jacobian from forward-mode passes, ``ShadingObjective.normal_equations``) or
+    "lbfgs" (the gradient-only path: L-BFGS-B on adjoint gradients, one render and one
+    backward pass per evaluation, for parameter counts where P+6 forward passes are too
+    many); max_iter: iterations of either; ftol: the dogleg stops after a step that lowers
+    the cost by less than this fraction. ``render`` options go to ``ShadingObjective`` (spp,
+    silhouette_spp, seed, jacobian_spp). Returns a ShadingFit."""
+    from .dogleg import dogleg
+    from .scan import posed_surface
     sm = model.surface_model(kind)
-    obj = ShadingObjective(model, sm, camera, plate, gamma, albedo, p_hat, curves, lam1, lam2, mask, **render)
-    P = obj.P
-    s = _scales(P)
+    P = len(model.blendshape_names) + 6
     z0 = np.r_[np.asarray(p_hat if p0 is None else p0, float), rotation, translation]
+    window = face_window(camera, posed_surface(sm, z0, P)[1])
+    obj = ShadingObjective(model, sm, camera, plate, gamma, albedo, p_hat, curves, lam1, lam2, mask,
+                           window=window, **render)
+    s = _scales(P)
     lo, hi = control_bounds(model)
     history, t0 = [], time.perf_counter()
 
-    def fun(u, restart=0):
-        try:
-            f, g = obj(u * s)
-        except SimulationError:
-            if not history:
-                raise
-            # the simulation cannot reach this trial point: a cost above every one seen makes
-            # the line search step back, as the dogleg rejects such a step
-            f, g = 10 * max(h["cost"] for h in history), np.zeros(len(u))
-            history.append({"iteration": len(history), "cost": f, "failed": True, "restart": restart,
-                            "seconds": time.perf_counter() - t0})
-            return f, g
-        history.append({"iteration": len(history), "cost": f, **obj.terms, "restart": restart,
+    def log(f, **extra):
+        history.append({"iteration": len(history), "cost": f, **obj.terms, **extra,
                         "seconds": time.perf_counter() - t0})
         if progress is not None:
             progress(history[-1])
+
+    if solver == "dogleg":
+        def fun(u):
+            ne = obj.normal_equations(u * s)
+            log(ne.cost)
+            return _ScaledEquations(ne, s)
+        res = dogleg(fun, z0 / s, lo / s, hi / s, max_iter=max_iter, ftol=ftol, min_radius=1e-2,
+                     adapt_curvature=True)
+        for h, step in zip(history[1:], res.history):       # the dogleg's verdict on each trial
+            h.update(accepted=step["accepted"], rho=step["rho"], radius=step["radius"], mu=step["mu"])
+        z, status = res.x * s, res.status
+    elif solver == "lbfgs":
+        z, status = _lbfgs(obj, z0, s, lo, hi, max_iter, restarts, log)
+    else:
+        raise InvfaceError(f"unknown solver '{solver}': use 'dogleg' or 'lbfgs'")
+    return ShadingFit(p=z[:P], rotation=z[P:P + 3], translation=z[P + 3:], history=history, status=status)
+
+
+class _ScaledEquations:
+    """NormalEquations in the scaled variables u = z / s: g_u = s g, H_u = s H s."""
+
+    def __init__(self, ne, s):
+        self.ne, self.s, self.cost = ne, s, ne.cost
+
+    @property
+    def gradient(self):
+        return self.s * self.ne.gradient
+
+    @property
+    def hessian(self):
+        return self.ne.hessian * np.outer(self.s, self.s)
+
+
+def _lbfgs(obj, z0, s, lo, hi, max_iter, restarts, log):
+    """L-BFGS-B on the adjoint gradient in scaled variables: (z, status)."""
+    from scipy.optimize import minimize
+    seen = []
+
+    def fun(u):
+        try:
+            f, g = obj(u * s)
+        except SimulationError:
+            if not seen:
+                raise
+            # the simulation cannot reach this trial point: a cost above every one seen
+            # makes the line search step back, as the dogleg rejects such a step
+            log(10 * max(seen), failed=True)
+            return 10 * max(seen), np.zeros(len(u))
+        seen.append(f)
+        log(f)
         return f, g * s
 
     bounds = list(zip(np.where(np.isfinite(lo), lo / s, None), np.where(np.isfinite(hi), hi / s, None)))
@@ -209,10 +376,9 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     # line search can stop on a sample pattern; restarting with fresh samples continues.
     for restart in range(restarts + 1):
         obj.renderer.seed = obj.renderer.seed + restart
-        res = minimize(lambda v: fun(v, restart), u, jac=True, method="L-BFGS-B", bounds=bounds,
-                       options={"maxiter": max_iter, "maxfun": 2 * max_iter, "ftol": 1e-7, "gtol": 1e-6})
+        res = minimize(fun, u, jac=True, method="L-BFGS-B", bounds=bounds,
+                       options={"maxiter": max_iter, "maxfun": 2 * max_iter, "ftol": 1e-4, "gtol": 1e-6})
         u, status = res.x, str(res.message)
-        if "ABNORMAL" not in status or len(history) >= 2 * max_iter:
+        if "ABNORMAL" not in status or len(seen) >= 2 * max_iter:
             break
-    z = u * s
-    return ShadingFit(p=z[:P], rotation=z[P:P + 3], translation=z[P + 3:], history=history, status=status)
+    return u * s, status

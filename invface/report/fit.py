@@ -69,13 +69,15 @@ def _bars(path, values, title, unit):
 
 def _convergence(path, history):
     def draw(ax):
-        for stage, colour in (("curves", "#2980b9"), ("shading", "#c0392b"), (None, "#2c3e50")):
-            h = [e for e in history if e.get("stage") == stage and "cost" in e]
+        stages = (("curves", "#2980b9"), ("shading", "#c0392b"), ("shading-simulation", "#8e44ad"),
+                  (None, "#2c3e50"))
+        for stage, colour in stages:
+            h = [(i, e["cost"]) for i, e in enumerate(history) if e.get("stage") == stage and "cost" in e]
             if h:
-                ax.semilogy([e.get("seconds", i) if stage == "shading" else i for i, e in enumerate(h)],
-                            [max(e["cost"], 1e-12) for e in h], "o-", ms=2, color=colour,
-                            label=stage or "dogleg")
-        ax.set_xlabel("iteration (curves, dogleg) / seconds (shading)")
+                i, c = np.array(h).T
+                ax.plot(i, np.maximum(c, 1e-12), "o-", ms=2, color=colour, label=stage or "dogleg")
+        ax.set_yscale("log")
+        ax.set_xlabel("log entry (stages in order)")
         ax.set_ylabel("cost")
         ax.legend(fontsize=7)
         ax.set_title("convergence", fontsize=9)
