@@ -339,7 +339,8 @@ def fit_plate_frame(model, plate, cal, curves, kinds, out, starts=None, iteratio
 
         def progress(h, bar=bar):
             bar.update(1)
-            bar.set_postfix(stage=h.get("stage"), cost=f"{h.get('cost', 0):.4g}")
+            stage = h.get("stage", "") + (f" ({h['pass']})" if "pass" in h else "")
+            bar.set_postfix(stage=stage, cost=f"{h.get('cost', 0):.4g}")
         try:
             fit = fit_plate(model, plate, cal, curves, kind=kind, start=(starts or {}).get(kind),
                             shading=shading, max_iter_shading=iterations, lam_curves=lam_curves,
@@ -396,13 +397,19 @@ def cmd_fit_plate(args):
         folder = out / frame.stem if len(frames) > 1 else out
         starts = fit_plate_frame(model, plate, cal, curves, kinds, folder, starts, args.iterations,
                                  not args.no_shading, source, lam_curves=args.curve_lambda, solver=args.solver)
+    if len(frames) > 1:
+        from .report.sequence import write_sequence_report
+        print(f"sequence report: {write_sequence_report(out)}")
     return 0
 
 
 def cmd_report(args):
     """(Re)write the HTML report of a fit folder."""
     from .report.fit import write_report
-    print(f"report: {write_report(args.run)}")
+    from .report.sequence import sequence_frames, write_sequence_report
+    run = Path(args.run)
+    single = (run / "fit.json").is_file() or any(run.glob("*/fit.json"))
+    print(f"report: {write_report(run) if single or not sequence_frames(run) else write_sequence_report(run)}")
     return 0
 
 

@@ -133,3 +133,30 @@ def test_fit_plate_command_rejects_black_plates_and_unknown_curves(small_express
     assert r.returncode == 2 and "left_ear" in r.stderr and "Traceback" not in r.stderr
     r = run("fit-plate", str(tmp_path / "missing.png"), *args)
     assert r.returncode == 2 and "not found" in r.stderr
+
+
+def test_fit_plate_on_a_folder_fits_the_frames_and_writes_the_sequence_page(small_expressive_model, tmp_path):
+    import json
+
+    from invface.fit.calibrate import Calibration
+    from invface.fit.samples import write_sample_plates
+    from invface.render.synthetic import skin_albedo, studio_light
+    m = small_expressive_model
+    Calibration(gamma=studio_light(), albedo=skin_albedo(m)).save(tmp_path / "calib.npz")
+    write_sample_plates(m, tmp_path / "shot", names=["neutral", "smile_blendshape"], size=(320, 240))
+    out = tmp_path / "out"
+    r = run("fit-plate", str(tmp_path / "shot"), "--calib", str(tmp_path / "calib.npz"),
+            "--resolution", str(SMALL_RESOLUTION), "--iterations", "5", "--curve-lambda", "400", "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    fits = {f: json.loads((out / f / "blendshape" / "fit.json").read_text()) for f in ("neutral", "smile_blendshape")}
+    w = {f: s["weights"]["lipCornerPull_L"] for f, s in fits.items()}
+    assert w["smile_blendshape"] > w["neutral"] + 0.2          # the truth: 0.7 and 0
+    # each frame is compared with its truth file (NAME.truth.json beside the plate)
+    assert all(s["truth"]["shape_median_mm"] < 0.5 for s in fits.values()), [s["truth"] for s in fits.values()]
+    page = (out / "index.html").read_text()
+    assert "weights_blendshape.png" in page and (out / "weights_blendshape.png").is_file()
+    assert 'href="smile_blendshape/index.html"' in page and (out / "smile_blendshape" / "index.html").is_file()
+    (out / "index.html").unlink()
+    r = run("report", str(out))                       # the report verb rewrites the sequence page
+    assert r.returncode == 0, r.stderr
+    assert "2 frames" in (out / "index.html").read_text()

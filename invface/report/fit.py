@@ -177,8 +177,15 @@ COMPARE = (("model", lambda s: s["kind"]),
            ("active muscles", lambda s: s.get("active_muscles", "-") if s.get("activations") else "-"),
            ("curve RMS (px)", lambda s: f"{s['curve_rms_px']:.2f}" if "curve_rms_px" in s else "-"),
            ("image RMS (linear)", lambda s: f"{s['image_rms']:.4f}" if "image_rms" in s else "-"),
-           ("seconds", lambda s: (" + ".join(f"{k} {v:.1f}" for k, v in s["seconds"].items())
-                                  if isinstance(s.get("seconds"), dict) else f"{s.get('seconds', 0):.1f}")))
+           ("seconds", lambda s: _seconds(s.get("seconds", 0))))
+
+
+def _seconds(sec):
+    """'total (stage s, ...)' of a {stage: s, "total": s} dict, or one number."""
+    if not isinstance(sec, dict):
+        return f"{sec:.1f}"
+    stages = ", ".join(f"{k} {v:.1f}" for k, v in sec.items() if k != "total")
+    return f"{sec['total']:.1f} ({stages})" if "total" in sec else stages
 
 
 def write_report(run, title=None):
