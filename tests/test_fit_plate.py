@@ -89,6 +89,11 @@ def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_m
     C = obj.image_jacobian(xr, Jall)
     assert C.shape == (P + 6, len(r))
     np.testing.assert_allclose(C.astype(np.float64) @ r, grad, rtol=1e-4, atol=1e-6 * np.abs(grad).max())
+    # the dogleg's pieces: the same gradient, and H = C C^T (no prior, no curves here)
+    ne = obj.normal_equations(z)
+    np.testing.assert_allclose(ne.gradient, grad, rtol=1e-5, atol=1e-8 * np.abs(grad).max())
+    np.testing.assert_allclose(ne.hessian, C.astype(np.float64) @ C.T.astype(np.float64), rtol=1e-4,
+                               atol=1e-7 * np.abs(ne.hessian).max())
     names = m.blendshape_names
     for idx, h in ((names.index("lipCornerPull_L"), 0.02), (names.index("browInnerUp_L"), 0.05), (P + 3, 2e-4)):
         d = np.zeros_like(z)

@@ -142,9 +142,9 @@ class ShadingObjective:
         self.terms = {}
 
     def _prior_and_curves(self, z, xr, Jall=None):
-        """Cost of the prior and curve terms at z (posed surface xr); with Jall also their
-        residual rows' Jacobians: (cost, rows (n,), J (n, P+6)), the rows scaled by the
-        square roots of the weights."""
+        """Residual rows of the prior and curve terms at z (posed surface xr), scaled by the
+        square roots of their weights, the prior's P rows first: (rows (n,), their Jacobian
+        (n, P+6), or None without Jall)."""
         P = self.P
         rows = [np.sqrt(self.lam2) * (z[:P] - self.p_hat)]
         jac = [np.sqrt(self.lam2) * np.eye(P, P + 6)] if Jall is not None else None
@@ -155,72 +155,68 @@ class ShadingObjective:
                 rc, Jc = self.curves.rows(xr, Jall)
                 rows += [np.sqrt(self.lam1) * r for r in rc]
                 jac += [np.sqrt(self.lam1) * J for J in Jc]
-        r = np.concatenate(rows)
-        n = P
-        self.terms = {"prior": 0.5 * float(r[:n] @ r[:n]), "curves": 0.5 * float(r[n:] @ r[n:])}
-        return 0.5 * float(r @ r), r, (None if jac is None else np.vstack(jac))
+        return np.concatenate(rows), (None if jac is None else np.vstack(jac))
+
+    def _cost(self, r_image, r_rest):
+        """Eq. 16's value from the image rows and the prior and curve rows; ``terms`` keeps
+        its three parts."""
+        P = self.P
+        self.terms = {"image": 0.5 * float(r_image @ r_image), "prior": 0.5 * float(r_rest[:P] @ r_rest[:P]),
+                      "curves": 0.5 * float(r_rest[P:] @ r_rest[P:])}
+        return sum(self.terms.values())
 
     def _render(self, xr):
         """Render the posed surface (V, 3) with gradients on: (Dr.Jit positions, image,
         image residual r = G M (F - F*) (m,))."""
-        dr, mi = self.dr, self.renderer.mi
+        mi = self.renderer.mi
         x = mi.Float(xr.astype(np.float32).ravel())
-        dr.enable_grad(x)
+        self.dr.enable_grad(x)
         img = self.renderer.render(x, self.gamma, self.albedo)
         rgb = np.array(img, np.float32)[..., :3]
-        r = self.G(rgb * self.mask) - self.target
-        self.terms = {"image": 0.5 * float(r @ r)}
-        return x, img, r
+        return x, img, self.G(rgb * self.mask) - self.target
+
+    def _backward(self, x, img, r, Jall):
+        """J^T r (P+6,) of the image rows: the adjoint G^T M r sent back through the render
+        to the positions x, then through d x_R / dz = Jall (P+6, V, 3)."""
+        mi = self.renderer.mi
+        adj = np.zeros(self.plate.shape[:2] + (4,), np.float32)
+        adj[..., :3] = self.G.adjoint(r) * self.mask
+        self.dr.backward(img * mi.TensorXf(adj))
+        return np.einsum("kvi,vi->k", Jall, np.array(self.dr.grad(x), np.float64).reshape(-1, 3))
 
     def __call__(self, z):
         """(cost, gradient (P+6,)): one render and one backward pass."""
-        dr, mi = self.dr, self.renderer.mi
         xr, Jall = posed_jacobian(self.sm, z, self.P)
         x, img, r = self._render(xr)
-        image = self.terms["image"]
-        adj = np.zeros((self.plate.shape[0], self.plate.shape[1], 4), np.float32)
-        adj[..., :3] = self.G.adjoint(r) * self.mask
-        dr.backward(img * mi.TensorXf(adj))
-        grad = np.einsum("kvi,vi->k", Jall, np.array(dr.grad(x), np.float64).reshape(-1, 3))
-        rest, rr, Jr = self._prior_and_curves(z, xr, Jall)
-        self.terms["image"] = image
-        return image + rest, grad + rr @ Jr
+        rr, Jr = self._prior_and_curves(z, xr, Jall)
+        return self._cost(r, rr), self._backward(x, img, r, Jall) + rr @ Jr
 
     def normal_equations(self, z):
         """Gauss-Newton pieces of Eq. 16 at z, for the dogleg: a lazy ``NormalEquations``.
 
         The cost needs one render (and, for the simulation, one solve). Its derivatives,
         asked for only when the dogleg accepts z, need d x_R / dz (the rig's, or the
-        simulation's tangent solves) and one forward-mode pass through the recorded render
-        per parameter through a render at ``jacobian_spp`` (~0.025 s each at 2 spp on a
-        460x540 window, silhouettes included), each sent through G M: H = J^T J, while
-        g = J^T r comes from the backward pass of the full-quality render."""
+        simulation's tangent solves), the backward pass of this render for g = J^T r, and
+        for H = J^T J the image Jacobian: one forward-mode pass per parameter through a
+        render at ``jacobian_spp`` (~0.025 s each at 2 spp on a 460x540 window, silhouettes
+        included), each sent through G M."""
         from .dogleg import NormalEquations
         from .scan import posed_surface
-        dr = self.dr
-        P = self.P
-        _, xr = posed_surface(self.sm, z, P)
+        _, xr = posed_surface(self.sm, z, self.P)
         x, img, r = self._render(xr)
-        image = self.terms["image"]
-        rest, _, _ = self._prior_and_curves(z, xr)
-        terms = dict(self.terms, image=image)
-        self.terms = terms
+        rr, _ = self._prior_and_curves(z, xr)
+        cost = self._cost(r, rr)
 
         def derivatives():
-            mi = self.renderer.mi
-            xr2, Jall = posed_jacobian(self.sm, z, P)
-            # the gradient: the exact adjoint of this render
-            adj = np.zeros(self.plate.shape[:2] + (4,), np.float32)
-            adj[..., :3] = self.G.adjoint(r) * self.mask
-            dr.backward(img * mi.TensorXf(adj))
-            g = np.einsum("kvi,vi->k", Jall, np.array(dr.grad(x), np.float64).reshape(-1, 3))
-            # the curvature: the image Jacobian from a render with fewer samples
+            xr2, Jall = posed_jacobian(self.sm, z, self.P)
+            # backward first: the renderer's adjoint pass reads the scene's current vertex
+            # positions, which the Jacobian's render replaces
+            g = self._backward(x, img, r, Jall)
             C = self.image_jacobian(xr2, Jall)
-            _, rr, Jr = self._prior_and_curves(z, xr2, Jall)
-            self.terms = terms
-            return g + rr @ Jr, (C @ C.T).astype(np.float64) + Jr.T @ Jr
+            rr2, Jr = self._prior_and_curves(z, xr2, Jall)
+            return g + rr2 @ Jr, (C @ C.T).astype(np.float64) + Jr.T @ Jr
 
-        return NormalEquations(image + rest, derivatives=derivatives)
+        return NormalEquations(cost, derivatives=derivatives)
 
     def image_jacobian(self, xr, Jall, spp=None):
         """J^T of the image residual r = G M (F - F*): (P+6, m) float32, one row per
@@ -278,8 +274,9 @@ def face_window(camera, xr, margin=0.15, align=1 << (LEVELS - 1)):
 def _scales(P):
     """One unit of the optimiser's variables: weights 0.1, jaw rotations 0.01 rad, jaw
     translations and the head translation 1 mm, head rotation 0.01 rad. The balance evens
-    out L-BFGS's curvature; the size sets its first trial step, a unit step (a weight by
-    1 or the head by 0.1 rad overshot to costs 10-15x the start's)."""
+    out the curvature the solvers see; the size sets L-BFGS's first trial step and the
+    dogleg's first trust radius (a unit step of a weight by 1 or the head by 0.1 rad
+    overshot to costs 10-15x the start's)."""
     s = np.full(P + 6, 0.1)
     s[P - 6:P - 3], s[P - 3:P] = 0.01, 0.001
     s[P:P + 3], s[P + 3:] = 0.01, 0.001
