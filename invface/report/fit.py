@@ -68,14 +68,21 @@ def _bars(path, values, title, unit):
 
 
 def _convergence(path, history):
+    """Cost per log entry, one colour per stage (and per pass of the curve stage: the
+    tracking pass and Eq. 15 weigh the controls differently, so their costs differ)."""
+    colours = {"curves (pose)": "#7fb3d5", "curves": "#2980b9", "curves (controls)": "#2980b9",
+               "shading": "#c0392b", "shading-simulation": "#8e44ad", "dogleg": "#2c3e50"}
+
     def draw(ax):
-        stages = (("curves", "#2980b9"), ("shading", "#c0392b"), ("shading-simulation", "#8e44ad"),
-                  (None, "#2c3e50"))
-        for stage, colour in stages:
-            h = [(i, e["cost"]) for i, e in enumerate(history) if e.get("stage") == stage and "cost" in e]
-            if h:
-                i, c = np.array(h).T
-                ax.plot(i, np.maximum(c, 1e-12), "o-", ms=2, color=colour, label=stage or "dogleg")
+        series = {}
+        for i, e in enumerate(history):
+            if "cost" in e:
+                label = e.get("stage") or "dogleg"
+                label += f" ({e['pass']})" if "pass" in e else ""
+                series.setdefault(label, []).append((i, max(e["cost"], 1e-12)))
+        for label, pts in series.items():
+            i, c = np.array(pts).T
+            ax.plot(i, c, "o-", ms=2, color=colours.get(label), label=label)
         ax.set_yscale("log")
         ax.set_xlabel("log entry (stages in order)")
         ax.set_ylabel("cost")

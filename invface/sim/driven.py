@@ -13,7 +13,6 @@ Derivatives with respect to p are in sim.adjoint.
 from __future__ import annotations
 
 from contextlib import contextmanager
-
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -99,19 +98,18 @@ class DrivenSimulation:
 
     def result_at(self, p):
         """The DrivenResult at p: the last one when p is unchanged, else a new solve, warm
-        from the last one (``start = "last"``), from rest (``"rest"``) or from one fixed
-        DrivenResult. With a fixed start the surface is a function of p alone; from the last
-        solve, contact planes and lip contacts depend on the path of earlier solves (up to
-        0.1 mm apart at the same p)."""
+        from the last one (``start = "last"``) or cold, from rest (``"rest"``). From rest the
+        surface is a function of p alone; from the last solve, contact planes and lip
+        contacts depend on the path of earlier solves (up to 0.1 mm apart at the same p)."""
         if self.last is not None and np.array_equal(self.last.p, np.asarray(p, float).reshape(-1)):
             return self.last
-        return self.solve(p, warm=None if isinstance(self.start, str) and self.start == "rest" else self.start)
+        return self.solve(p, warm=None if self.start == "rest" else "last")
 
     @contextmanager
     def starting_from(self, start):
-        """Context in which new solves start from ``start``: "last", "rest" or a DrivenResult."""
-        if not isinstance(start, DrivenResult) and start not in ("last", "rest"):
-            raise ValueError(f"start must be 'last', 'rest' or a DrivenResult, got {start!r}")
+        """Context in which new solves start from ``start``: "last" or "rest"."""
+        if start not in ("last", "rest"):
+            raise ValueError(f"start must be 'last' or 'rest', got {start!r}")
         old, self.start = self.start, start
         try:
             yield self
