@@ -108,13 +108,18 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     lap("orient")
 
     say("landmarks (fixed-stencil curvature)")
-    L, _ = find_landmarks(Va, Fg, template)
+    L, off_scan = find_landmarks(Va, Fg, template)
     TL = template_landmarks(template)
+    if off_scan:
+        say(f"partial scan: {', '.join(off_scan)} off the scan (on its edge); their curves are left out and "
+            "the head is completed from the template")
     lap("landmarks")
 
     say("feature curves")
     Cg = curve_set(Va, Fg, L)
     Ct = curve_set(template.neutral, template.triangles, TL)
+    if off_scan:
+        Ct, Cg = ({k: c for k, c in C.items() if not set(k) & set(off_scan)} for C in (Ct, Cg))
     lap("curves")
 
     rid, rpos, opened = map_openings(template.neutral, template.triangles, TL, Va, Fg, L)
@@ -192,7 +197,7 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
         "alignment_residual_mm": al.residual * 1000, "flipped_residual_mm": al.flipped_residual * 1000,
         "landmark_to_morph_mm": {k: float(np.linalg.norm(on_model[k] - L[k]) * 1000) for k in L},
         "surface_to_target_mm": {"mean": float(dist.mean() * 1000), "max": float(dist.max() * 1000)},
-        "openings_mapped": opened, "ear_boxes": len(ears), "snapped_fraction": float(surf.snapped.mean()), "inverted_triangles": surf.inverted,
+        "off_scan_landmarks": list(off_scan), "openings_mapped": opened, "ear_boxes": len(ears), "snapped_fraction": float(surf.snapped.mean()), "inverted_triangles": surf.inverted,
         "triangle_relax_rounds": surf.relax_rounds, "tet_relaxed_vertices": vm.relaxed_vertices, "inner_pushed": vm.pushed,
         "tet_relax_rounds": vm.relax_rounds, "quality": q,
         "centerlines_inside": inside_fraction(X1, tets, np.concatenate([m.centerline for m in muscles])),

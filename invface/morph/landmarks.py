@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 from ..errors import MeshError
 from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.sections import plane_sections
-from ..mesh.triangles import boundary_loops
+from ..mesh.triangles import boundary_edges, boundary_loops
 from ..template.features import profile_concavity
 from .curvature import feature_strength
 from .orient import rigid_icp
@@ -45,6 +45,10 @@ LANDMARKS = ("nose_tip", "nose_bridge", "subnasale", "top_of_head", "chin", "nec
              "alar_L", "alar_R", "stomion")
 EAR_CURVATURE = 140.0     # 1/m: paper 001 sec. 9.1, sum of absolute curvatures on the ears
 PATCH_RADIUS = 0.015      # m: template skin registered around eye/mouth corners and alar points
+OUTER = ("top_of_head", "head_extreme_L", "head_extreme_R", "neck_start")   # may be off a partial scan
+NECK_DROP = 0.02          # m: the neck start is this far below the chin on the profile
+EDGE_DISTANCE = 0.001     # m: an outer landmark this close to the scan's open edge ...
+PRIOR_GAP = 0.01          # m: ... whose template prior lies this far off the scan is off the scan
 
 
 _TEMPLATE_POINTS = {}
@@ -183,8 +187,18 @@ def _chin(P, tip, drop=0.03, prominence=0.002):
 
 
 def find_landmarks(V, F, model):
-    """Landmarks {name: (3,) point in the model frame} and the profile polyline, on an aligned
-    target (V (n,3) m in the model frame, F). Raises MeshError when a landmark cannot be placed."""
+    """Landmarks {name: (3,) point in the model frame} on an aligned target (V (n,3) m in the
+    model frame, F), and the names of those off the scan (a tuple). Raises MeshError when a
+    landmark cannot be placed.
+
+    Partial scans (paper 001 sec. 8.1, a front-of-face scan): the top of the head or a head
+    extreme found on the scan's open edge (within EDGE_DISTANCE) while the template's
+    landmark, carried by the face similarity, lies more than PRIOR_GAP off the scan marks
+    where the scan stops, not where the head does (a wide head's extremes can sit on the
+    edge of a full scan: those stay); so does a neck start that the profile cannot reach
+    (the scan ends less than half NECK_DROP below the chin; the template itself ends at
+    its neck start, so no edge test there). Such a landmark keeps that prior, and its curves
+    are left out of the morph (``build_model``), which completes the head from the template."""
     A, t = face_similarity(model, V, F)
     prior = {k: A @ model.neutral[v] + t for k, v in model.landmarks.items() if k in LANDMARKS}
     # priors carried onto the target surface
@@ -257,7 +271,7 @@ def find_landmarks(V, F, model):
     lo = (idx < stom) & (idx > chin)
     L["lip_lower"] = P[idx[lo][np.argmax(z[lo])]] if lo.any() else P[stom]
     neck = idx[(idx <= chin)]
-    L["neck_start"] = P[neck[np.argmin(np.abs(y[neck] - (P[chin, 1] - 0.02)))]]
+    L["neck_start"] = P[neck[np.argmin(np.abs(y[neck] - (P[chin, 1] - NECK_DROP)))]]
     L["top_of_head"] = P[np.argmax(y)]
     band = (V[:, 1] > L["chin"][1]) & (np.abs(V[:, 1] - prior["head_extreme_L"][1]) < 0.03)
     if not band.any():
@@ -266,4 +280,19 @@ def find_landmarks(V, F, model):
     bid = bid[~_ears(V, F, bid)]
     L["head_extreme_L"] = V[bid[np.argmax(V[bid, 0])]]
     L["head_extreme_R"] = V[bid[np.argmin(V[bid, 0])]]
-    return {k: np.asarray(L[k], float) for k in LANDMARKS}, P
+    off = []
+    E = boundary_edges(F)
+    if len(E):
+        head = OUTER[:3]
+        a, ab = V[E[:, 0]], V[E[:, 1]] - V[E[:, 0]]                  # open-edge segments
+        Q = np.array([L[k] for k in head])[:, None]
+        s = np.clip(np.einsum("ij,nij->ni", ab, Q - a) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-30), 0, 1)
+        d = np.linalg.norm(a + s[..., None] * ab - Q, axis=2).min(1)
+        gap = closest_points(np.array([A @ model.neutral[model.landmarks[k]] + t for k in head]), V, F)[2]
+        off = [k for k, dk, gk in zip(head, d, gap) if dk < EDGE_DISTANCE and gk > PRIOR_GAP]
+    if L["neck_start"][1] > L["chin"][1] - 0.5 * NECK_DROP:           # the profile ends above it
+        off.append("neck_start")
+    for k in off:
+        L[k] = A @ model.neutral[model.landmarks[k]] + t
+    off = tuple(off)
+    return {k: np.asarray(L[k], float) for k in LANDMARKS}, off
