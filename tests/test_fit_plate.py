@@ -216,3 +216,26 @@ def test_lip_volume_of_blendshapes_changes_and_rest_is_zero(small_expressive_mod
     p = np.zeros(K + 6)
     p[m.blendshape_names.index("lipPucker")] = 1.0
     assert abs(lip_volume_change(m, p)) > 0.01             # blendshapes do not keep the lips' volume
+
+
+def test_shading_dogleg_log_stays_aligned_when_a_trial_fails(small_expressive_model, monkeypatch):
+    """A trial the simulation cannot reach is a rejected dogleg step, logged as failed, so
+    each later log entry still carries its own trial's verdict."""
+    from invface.fit import shading
+    from invface.sim.quasistatic import SimulationError
+    m = small_expressive_model
+    cam, p, g, a, plate = _shading_scene(m)
+    real, calls = shading.ShadingObjective.normal_equations, []
+
+    def flaky(self, z):
+        calls.append(1)
+        if len(calls) == 2:
+            raise SimulationError("Newton did not converge")
+        return real(self, z)
+    monkeypatch.setattr(shading.ShadingObjective, "normal_equations", flaky)
+    fit = shading.fit_shading(m, cam, plate, g, a, p * 0.6, ROT, TR, max_iter=4, ftol=0.0)
+    assert len(fit.history) == len(calls) and fit.history[1]["failed"] and "cost" not in fit.history[1]
+    assert fit.history[1]["accepted"] is False and fit.history[1]["rho"] == -1.0
+    assert all("rho" in h for h in fit.history[1:])
+    costs = [h["cost"] for h in fit.history[2:] if h["accepted"]]
+    assert costs and min(costs) < fit.history[0]["cost"]

@@ -318,7 +318,12 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
 
     if solver == "dogleg":
         def fun(u):
-            ne = obj.normal_equations(u * s)
+            try:
+                ne = obj.normal_equations(u * s)
+            except SimulationError:
+                # the dogleg rejects this trial; its log entry keeps the verdicts aligned
+                history.append({"iteration": len(history), "failed": True, "seconds": time.perf_counter() - t0})
+                raise
             log(ne.cost)
             return _ScaledEquations(ne, s)
         res = dogleg(fun, z0 / s, lo / s, hi / s, max_iter=max_iter, ftol=ftol, min_radius=1e-2,
