@@ -45,7 +45,7 @@ LANDMARKS = ("nose_tip", "nose_bridge", "subnasale", "top_of_head", "chin", "nec
              "alar_L", "alar_R", "stomion")
 EAR_CURVATURE = 140.0     # 1/m: paper 001 sec. 9.1, sum of absolute curvatures on the ears
 PATCH_RADIUS = 0.015      # m: template skin registered around eye/mouth corners and alar points
-OUTER = ("top_of_head", "head_extreme_L", "head_extreme_R", "neck_start")   # may be off a partial scan
+HEAD_OUTER = ("top_of_head", "head_extreme_L", "head_extreme_R")   # may be off a partial scan's edge
 NECK_DROP = 0.02          # m: the neck start is this far below the chin on the profile
 EDGE_DISTANCE = 0.001     # m: an outer landmark this close to the scan's open edge ...
 PRIOR_GAP = 0.01          # m: ... whose template prior lies this far off the scan is off the scan
@@ -200,10 +200,11 @@ def find_landmarks(V, F, model):
     its neck start, so no edge test there). Such a landmark keeps that prior, and its curves
     are left out of the morph (``build_model``), which completes the head from the template."""
     A, t = face_similarity(model, V, F)
-    prior = {k: A @ model.neutral[v] + t for k, v in model.landmarks.items() if k in LANDMARKS}
-    # priors carried onto the target surface
-    tri, w, _ = closest_points(np.array(list(prior.values())), V, F)
-    prior = dict(zip(prior, barycentric_points(V, F, tri, w)))
+    carried = {k: A @ model.neutral[v] + t for k, v in model.landmarks.items() if k in LANDMARKS}
+    # priors: the carried landmarks projected onto the target surface (gap: how far off it)
+    tri, w, gap = closest_points(np.array(list(carried.values())), V, F)
+    prior = dict(zip(carried, barycentric_points(V, F, tri, w)))
+    gap = dict(zip(carried, gap))
     P = profile_curve(V, F, prior["nose_tip"])
     y, z = P[:, 1], P[:, 2]
     idx = np.arange(len(P))
@@ -283,16 +284,13 @@ def find_landmarks(V, F, model):
     off = []
     E = boundary_edges(F)
     if len(E):
-        head = OUTER[:3]
         a, ab = V[E[:, 0]], V[E[:, 1]] - V[E[:, 0]]                  # open-edge segments
-        Q = np.array([L[k] for k in head])[:, None]
+        Q = np.array([L[k] for k in HEAD_OUTER])[:, None]
         s = np.clip(np.einsum("ij,nij->ni", ab, Q - a) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-30), 0, 1)
         d = np.linalg.norm(a + s[..., None] * ab - Q, axis=2).min(1)
-        gap = closest_points(np.array([A @ model.neutral[model.landmarks[k]] + t for k in head]), V, F)[2]
-        off = [k for k, dk, gk in zip(head, d, gap) if dk < EDGE_DISTANCE and gk > PRIOR_GAP]
+        off = [k for k, dk in zip(HEAD_OUTER, d) if dk < EDGE_DISTANCE and gap[k] > PRIOR_GAP]
     if L["neck_start"][1] > L["chin"][1] - 0.5 * NECK_DROP:           # the profile ends above it
         off.append("neck_start")
     for k in off:
-        L[k] = A @ model.neutral[model.landmarks[k]] + t
-    off = tuple(off)
-    return {k: np.asarray(L[k], float) for k in LANDMARKS}, off
+        L[k] = carried[k]
+    return {k: np.asarray(L[k], float) for k in LANDMARKS}, tuple(off)
