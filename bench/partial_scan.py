@@ -18,7 +18,7 @@ import numpy as np
 
 import invface
 from invface.morph.build import build_model
-from invface.morph.synthetic import random_identity, random_pose
+from invface.morph.synthetic import front_part, onto_part, random_identity, random_pose
 
 
 def main():
@@ -29,19 +29,14 @@ def main():
     a = ap.parse_args()
     tpl = invface.template.build(resolution=a.resolution)
     X = random_identity(tpl.neutral, a.seed, amplitude=0.003)
-    keep = X[tpl.triangles].mean(1)[:, 2] > a.cut
-    used = np.unique(tpl.triangles[keep])
-    remap = np.full(len(X), -1)
-    remap[used] = np.arange(len(used))
+    used, faces = front_part(X, tpl.triangles, a.cut)
     Y, _, _ = random_pose(X[used], a.seed, unit=0.001)
     print(f"target: {len(used)} of {len(X)} vertices of the identity (z > {a.cut} m)")
     t0 = time.perf_counter()
-    model, res = build_model((Y, remap[tpl.triangles[keep]]), template=tpl, expressions="copy")
+    model, res = build_model((Y, faces), template=tpl, expressions="copy")
     sec = time.perf_counter() - t0
     A = model.scan_transform
-    P, Q = X[used], Y @ A[:3, :3].T + A[:3, 3]
-    U, _, Wt = np.linalg.svd((P - P.mean(0)).T @ (Q - Q.mean(0)))
-    truth = (X - P.mean(0)) @ (U @ Wt) + Q.mean(0)
+    truth = onto_part(X, used, Y @ A[:3, :3].T + A[:3, 3])
     err = np.linalg.norm(model.neutral - truth, axis=1) * 1000
     on = np.zeros(len(X), bool)
     on[used] = True

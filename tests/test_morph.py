@@ -11,7 +11,7 @@ from invface.morph.build import build_model
 from invface.morph.curvature import stencil_curvature
 from invface.morph.landmarks import template_landmarks
 from invface.morph.openings import OPENINGS, ordered_loops, split_loop
-from invface.morph.synthetic import random_identity, random_pose
+from invface.morph.synthetic import front_part, onto_part, random_identity, random_pose
 from invface.morph.target import clean
 
 # sharp features must be found within 3 mm, the softer ones (corners of slits that the
@@ -84,18 +84,13 @@ def test_partial_scan_is_completed_from_the_template(small_expressive_model):
     10.8 mm on the scan, 23.9 mm off it; now 4.4 and 8.5 mm.)"""
     tpl = small_expressive_model
     X = random_identity(tpl.neutral, 3, amplitude=0.003)
-    keep = X[tpl.triangles].mean(1)[:, 2] > 0.02        # the front of the head: no back, no ears
-    used = np.unique(tpl.triangles[keep])
-    remap = np.full(len(X), -1)
-    remap[used] = np.arange(len(used))
+    used, faces = front_part(X, tpl.triangles, 0.02)     # the front of the head: no back, no ears
     Y, _, _ = random_pose(X[used], 3, unit=0.001)
-    model, res = build_model((Y, remap[tpl.triangles[keep]]), template=tpl, expressions="copy")
+    model, res = build_model((Y, faces), template=tpl, expressions="copy")
     assert {"top_of_head", "head_extreme_L", "head_extreme_R"} <= set(res.stats["off_scan_landmarks"])
-    # the identity in the model frame, by the similarity that carries its scanned part there
+    # the identity in the model frame, carried there by its scanned part
     A = model.scan_transform
-    P, Q = X[used], Y @ A[:3, :3].T + A[:3, 3]
-    U, _, Wt = np.linalg.svd((P - P.mean(0)).T @ (Q - Q.mean(0)))
-    truth = (X - P.mean(0)) @ (U @ Wt) + Q.mean(0)
+    truth = onto_part(X, used, Y @ A[:3, :3].T + A[:3, 3])
     err = np.linalg.norm(model.neutral - truth, axis=1) * 1000
     on = np.zeros(len(X), bool)
     on[used] = True

@@ -27,3 +27,21 @@ def random_pose(X, seed, unit=0.001, shift=0.2):
     R = Rotation.random(random_state=seed).as_matrix()
     t = rng.normal(0, shift, 3)
     return (X @ R.T + t) / unit, R, t
+
+
+def front_part(X, F, cut):
+    """The part of a head (X (V,3) m, F (T,3)) in front of the plane z = cut (m): a partial,
+    front-of-face scan. Returns (ids (n,) of the kept vertices, faces (t,3) on them)."""
+    keep = X[F].mean(1)[:, 2] > cut
+    ids = np.unique(F[keep])
+    remap = np.full(len(X), -1)
+    remap[ids] = np.arange(len(ids))
+    return ids, remap[F[keep]]
+
+
+def onto_part(X, ids, Q):
+    """X (V,3) moved rigidly so that its part X[ids] lies best on Q (n,3) (least squares):
+    a whole head carried into the frame where only its scanned part is known."""
+    P = X[ids]
+    U, _, Wt = np.linalg.svd((P - P.mean(0)).T @ (Q - Q.mean(0)))
+    return (X - P.mean(0)) @ (U @ Wt) + Q.mean(0)
