@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 from ..errors import MeshError
 from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.sections import plane_sections
-from ..mesh.triangles import boundary_edges, boundary_loops
+from ..mesh.triangles import boundary_edges, boundary_loops, edge_components, unique_edges
 from ..template.features import profile_concavity
 from .curvature import feature_strength
 from .orient import rigid_icp
@@ -44,6 +44,8 @@ LANDMARKS = ("nose_tip", "nose_bridge", "subnasale", "top_of_head", "chin", "nec
              "eye_outer_R", "mouth_corner_L", "mouth_corner_R", "lip_upper", "lip_lower",
              "alar_L", "alar_R", "stomion")
 EAR_CURVATURE = 140.0     # 1/m: paper 001 sec. 9.1, sum of absolute curvatures on the ears
+EAR_REACH = 0.03          # m: an ear region comes this close to the head extreme (ICT: 22 mm)
+EAR_SIZE = 0.03           # m: and spans at least this much (ICT's ears: 63 mm tall)
 PATCH_RADIUS = 0.015      # m: template skin registered around eye/mouth corners and alar points
 HEAD_OUTER = ("top_of_head", "head_extreme_L", "head_extreme_R")   # may be off a partial scan's edge
 NECK_DROP = 0.02          # m: the neck start is this far below the chin on the profile
@@ -158,16 +160,27 @@ def _ears(V, F, ids, threshold=EAR_CURVATURE, grow=0.01):
 
 def ear_boxes(V, F, L, grow=0.005):
     """Bounding boxes (k,2,3) (min, max corners, m) of the scan's ears (paper 001 sec. 9.1):
-    the high-curvature regions on the outer third of the head between the chin and the top
-    of the head (landmarks L), grown by ``grow``, one box per side that has one. The template
-    has no ears: the surface morph neither snaps onto nor snaps inside these boxes."""
+    connected high-curvature regions on the outer third of the head between the chin and the
+    top of the head (landmarks L), grown by ``grow``, that reach within EAR_REACH of that
+    side's head extreme (the paper's path back to the extreme) and span at least EAR_SIZE
+    (smaller regions are discarded); one box per side that has one. The template has no
+    ears: the surface morph neither snaps onto nor snaps inside these boxes. (Without the
+    reach and size tests, a cheekbone and a jaw angle sharpened by a smooth identity change
+    spanned a box over 38 % of the head in the template round trip.)"""
     ids = np.flatnonzero((V[:, 1] > L["chin"][1]) & (V[:, 1] < L["top_of_head"][1]))
     ear = ids[_ears(V, F, ids, grow=grow)]
+    mask = np.zeros(len(V), bool)
+    mask[ear] = True
+    E = unique_edges(F)[0]
+    label = edge_components(E[mask[E].all(1)], len(V))[ear]
     boxes = []
-    for side in (1, -1):
-        s = ear[np.sign(V[ear, 0]) == side]
-        if len(s) >= 10:
-            boxes.append([V[s].min(0), V[s].max(0)])
+    for side, name in ((1, "head_extreme_L"), (-1, "head_extreme_R")):
+        parts = [P for c in np.unique(label) if len(P := V[ear[label == c]]) and np.sign(P[:, 0].mean()) == side
+                 and np.ptp(P, axis=0).max() >= EAR_SIZE
+                 and np.linalg.norm(P - L[name], axis=1).min() < EAR_REACH]
+        if parts:
+            P = np.concatenate(parts)
+            boxes.append([P.min(0), P.max(0)])
     return np.array(boxes).reshape(-1, 2, 3)
 
 

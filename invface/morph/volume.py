@@ -81,6 +81,9 @@ def volume_displacement(model, surface_displacement, keep_depth=MIN_DEPTH_FRACTI
     return dX, ids, int(low.sum())
 
 
+DEGENERATE = 1e-3        # radius ratio below which a morphed tet is unusable (builds: >= 0.009)
+
+
 def _bad_tets(X, tets, min_radius_ratio):
     return (signed_volumes(X, tets) <= 0) | (radius_ratio(X, tets) < min_radius_ratio)
 
@@ -128,7 +131,8 @@ def carry_fibers(X0, X1, tets, tet_ids, fibers):
 
 def morph_volume(model, surface_displacement, min_radius_ratio, progress=None):
     """Morph the flesh of ``model`` by the skin displacement (V,3). Raises MeshError when tets
-    stay inverted after relaxation."""
+    stay inverted or flattened (radius ratio under DEGENERATE) after relaxation: a tet of
+    volume 1e-25 m^3 passed a plain sign test and then broke point location and the solver."""
     say = progress or (lambda m: None)
     dX, ids, pushed = volume_displacement(model, surface_displacement)
     if pushed:
@@ -141,11 +145,11 @@ def morph_volume(model, surface_displacement, min_radius_ratio, progress=None):
     if n_bad:
         say(f"relaxing {n_bad} inverted or low-quality tets")
         X, moved, rounds = relax_tets(X, model.rest_positions, model.tets, held, min_radius_ratio)
-    vol = signed_volumes(X, model.tets)
-    if (vol <= 0).any():
-        raise MeshError(f"the morphed flesh has {int((vol <= 0).sum())} inverted tets after relaxation: "
-                        "the target is too far from the template's proportions (check the landmarks "
-                        "in the --preview sheet)")
+    bad = _bad_tets(X, model.tets, DEGENERATE)
+    if bad.any():
+        raise MeshError(f"the morphed flesh has {int(bad.sum())} inverted or flattened tets (radius ratio "
+                        f"under {DEGENERATE}) after relaxation: the target is too far from the template's "
+                        "proportions (check the landmarks in the --preview sheet)")
     return VolumeMorph(X, pushed, moved, rounds)
 
 
