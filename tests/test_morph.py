@@ -54,6 +54,9 @@ def test_round_trip(actors, small_expressive_model):
         assert d.mean() < 1e-3
         corr = np.linalg.norm(model.neutral - truth, axis=1)
         assert np.mean(corr) < 0.005
+        # the template has no ears: no ear boxes, nearly all the skin snapped (a cheekbone and
+        # a jaw angle boxed as "ears" once left 38 % of it to the Poisson fill)
+        assert res.stats["ear_boxes"] == 0 and res.stats["snapped_fraction"] > 0.9
         q = res.stats["quality"]
         assert q["inverted"] == 0 and q["min_volume_m3"] > 0
         assert res.stats["centerlines_inside"] > 0.9
@@ -98,20 +101,33 @@ def test_partial_scan_is_completed_from_the_template(small_expressive_model):
     assert res.stats["quality"]["inverted"] == 0
 
 
-def test_real_scan_ict_neutral(small_model):
+def test_real_scan_ict_neutral(small_model, tmp_path):
     """ICT-FaceKit's neutral (cm, with neck, ears, open eyes and parted lips; proportions
-    1-2 cm off the template's) builds a valid model with landmarks on its real features."""
+    1-2 cm off the template's) builds a valid model with landmarks on its real features;
+    its jawOpen blendshape is split into the jaw's rotation and a remainder that the muscle
+    simulation follows."""
     from conftest import ICT
     from invface.mesh.meshfile import read_mesh
     from invface.mesh.tets import radius_ratio, signed_volumes
     from invface.mesh.triangles import boundary_loops
     if not (ICT / "neutral.obj").exists():
         pytest.skip("ICT-FaceKit data (../shared/data/ict-facekit) is not available")
-    model, res = build_model(ICT / "neutral.obj", template=small_model, expressions="none")
+    V, F = read_mesh(ICT / "neutral.obj")
+    ex = np.load(ICT / "expressions.npz")
+    for name in ("jawOpen", "mouthSmile_L"):
+        trimesh.Trimesh(V + ex["deltas"][list(ex["names"]).index(name)], F, process=False).export(tmp_path / f"{name}.obj")
+    model, res = build_model(ICT / "neutral.obj", blendshapes=tmp_path, template=small_model, expressions="none")
+    jaw = np.array(model.meta["blendshape_jaw"]["jawOpen"])
+    assert 0.25 < jaw[0] < 0.45 and np.abs(jaw[1:]).max() < 0.02, jaw          # 19 degrees
+    p = model.parameters({"jawOpen": 1.0})
+    p[-6:] = jaw
+    target = model.surface_model("blendshape").surface(p)                       # the imported shape
+    err = np.linalg.norm(model.surface_model("simulation").surface(p) - target, axis=1)
+    moved = np.linalg.norm(target - model.neutral, axis=1) > 0.001
+    assert err[moved].mean() < 0.004, err[moved].mean()                         # 3.2 mm, offsets to 42
     assert (signed_volumes(model.rest_positions, model.tets) > 0).all()
     assert radius_ratio(model.rest_positions, model.tets).min() >= 0.005
     assert res.stats["centerlines_inside"] > 0.9
-    V, F = read_mesh(ICT / "neutral.obj")
     A = model.scan_transform
     V = V @ A[:3, :3].T + A[:3, 3]
     L = res.landmarks
@@ -163,6 +179,12 @@ def test_cleaning_handles_duplicates_flips_and_units(small_model):
     assert any("duplicated" in n for n in t.notes)
     fn = np.cross(t.vertices[t.faces[:, 1]] - t.vertices[t.faces[:, 0]], t.vertices[t.faces[:, 2]] - t.vertices[t.faces[:, 0]])
     assert (fn[:, 2] > 0).mean() > 0.6                # the face's normals point forward (+Z) again
+    # the template's closed lip slit: its two lips coincide in the neutral, but a jaw-opening
+    # blendshape parts them, so with the shapes given they stay two (the copies still merge)
+    opening = small_model.jaw_weights[:, None] * np.array([0.0, -0.01, 0.0])
+    shapes = np.concatenate([opening, opening[:50]])[None] * 100
+    t2 = clean(V2 * 100, F2, name="scan.obj", shapes=shapes)
+    assert len(t.vertices) < len(V) and len(t2.vertices) == len(V)
 
 
 @pytest.mark.parametrize("shape", ["sphere", "box"])
@@ -198,6 +220,69 @@ def test_blendshape_import(tmp_path):
     trimesh.creation.icosphere(1).export(tmp_path / "broken.obj")
     with pytest.raises(MeshError, match="broken.obj.*topology"):
         read_blendshapes(tmp_path, len(s.vertices), s.vertices)
+
+
+def test_jaw_split_recovers_the_skinning(small_model):
+    """A jaw shape made by the rig's own skinning (plus a lip offset) is split back into its
+    jaw parameters and a remainder that the rig turns into exactly the imported shape."""
+    from invface.model.rig import skin
+    from invface.morph.jaw import fit_jaw, is_jaw_shape, split_jaw
+    m = small_model
+    n, w = m.neutral, m.jaw_weights
+    j0 = np.array([0.2, 0.02, -0.01, 0.0, 0.002, 0.001])
+    assert np.allclose(fit_jaw(m, skin(n, w, m.jaw_matrix(j0)), w > 0), j0, atol=1e-7)
+    lip = n[m.landmarks["stomion"]]
+    bump = 0.002 * np.exp(-np.sum((n - lip) ** 2, 1) / (2 * 0.01 ** 2))[:, None] * np.array([0, -1.0, 0.5])
+    shape = skin(n + bump, w, m.jaw_matrix(j0))
+    names = ["jawOpen", "mouthSmile_L"]
+    D = np.array([shape - n, bump])
+    out, jaws, stats = split_jaw(m, names, D)
+    assert list(stats) == ["jawOpen"] and jaws["mouthSmile_L"] == [0.0] * 6
+    assert abs(jaws["jawOpen"][0] - 0.2) < 0.01 and np.allclose(out[1], bump)
+    assert np.abs(skin(n + out[0], w, m.jaw_matrix(jaws["jawOpen"])) - shape).max() < 1e-12
+    assert stats["jawOpen"]["mean_after_mm"] < 0.2 * stats["jawOpen"]["mean_before_mm"]
+    assert all(map(is_jaw_shape, ["jawOpen", "jawLeft", "AU26", "AU27_mouthStretch"]))
+    assert not any(map(is_jaw_shape, ["mouthClose", "AU12", "lipCornerPull_L"]))
+
+
+def test_imported_jaw_shape_drives_the_simulation(small_expressive_model, tmp_path):
+    """An actor's blendshape files with the jaw's rotation baked into jawOpen: the build splits
+    it into the jaw and a remainder, so the blendshape rig reproduces the imported shape and
+    the muscle simulation (jaw bone at the split jaw, tracks from the remainder) follows it.
+    Unsplit, an ICT jawOpen asked the simulation to open the skin around a closed jaw, and
+    Newton did not converge."""
+    def write_mesh(path, V, F):
+        trimesh.Trimesh(V, F, process=False).export(path)
+    tpl = small_expressive_model
+    X = random_identity(tpl.neutral, 5, amplitude=0.003)
+    Y, R, t = random_pose(X, 5, unit=0.001)
+    write_mesh(tmp_path / "neutral.obj", Y, tpl.triangles)
+    rig = tpl.surface_model("blendshape")
+    files = tmp_path / "shapes"
+    files.mkdir()
+    imported = {}
+    for name in ("jawOpen", "lipCornerPull_L"):        # the template's, jaw rotation included
+        p = np.zeros(len(tpl.blendshape_names) + 6)
+        p[tpl.blendshape_names.index(name)] = 1
+        p[-6:] = tpl.meta["blendshape_jaw"][name]
+        imported[name] = X + rig.surface(p) - tpl.neutral
+        write_mesh(files / f"{name}.obj", (imported[name] @ R.T + t) / 0.001, tpl.triangles)
+    model, res = build_model(tmp_path / "neutral.obj", blendshapes=files, template=tpl)
+    jaw = np.array(model.meta["blendshape_jaw"]["jawOpen"])
+    assert 0.18 < jaw[0] < 0.3 and np.abs(jaw[1:3]).max() < 0.02, jaw       # made with 0.22 rad
+    assert set(res.stats["jaw_split"]) == {"jawOpen"}
+    assert model.meta["blendshape_jaw"]["lipCornerPull_L"] == [0.0] * 6
+    on = res.surface.snapped
+    A = model.scan_transform
+    for name, shape in imported.items():
+        truth = ((shape @ R.T + t) / 0.001) @ A[:3, :3].T + A[:3, 3]      # the file, model frame
+        p = model.parameters({name: 1.0})
+        p[-6:] = model.meta["blendshape_jaw"][name]
+        rig_x = model.surface_model("blendshape").surface(p)
+        assert closest_points(rig_x[on], truth, tpl.triangles)[2].max() < 5e-5, name   # 2 mm with the lips merged
+        sim_x = model.surface_model("simulation").surface(p)
+        d = closest_points(sim_x[on], truth, tpl.triangles)[2]
+        assert d.mean() < 0.001 and np.quantile(d, 0.95) < 0.003, (name, d.mean(), np.quantile(d, 0.95))
 
 
 def test_cli_rejects_a_sphere(tmp_path, capsys):

@@ -4,9 +4,9 @@ Pipeline: clean the scan (target.py) -> orientation, symmetry and rigid alignmen
 template (orient.py) -> fixed-stencil curvature and landmarks (curvature.py, landmarks.py)
 -> feature curves (curves.py) -> surface Poisson morph, snapping, inverted-triangle
 relaxation, partial-scan completion (surface.py) -> volumetric morph of flesh, bones,
-muscles, relaxation of bad tets (volume.py) -> blendshapes (imported from the actor's files,
-or the template's expressions re-simulated on the new anatomy, or copied) -> muscle-track
-precompute (paper 000 Eq. 10-11).
+muscles, relaxation of bad tets (volume.py) -> blendshapes (imported from the actor's files
+with the jaw's rotation split out of the jaw shapes (jaw.py), or the template's expressions
+re-simulated on the new anatomy, or copied) -> muscle-track precompute (paper 000 Eq. 10-11).
 
 The new model keeps the template's topology (surface, tets, muscles, landmark and curve ids),
 so everything built for the template (rig, simulation, fitting, reports) works on it; its
@@ -26,6 +26,7 @@ from ..mesh.meshfile import read_mesh
 from ..mesh.tets import locate, quality_summary
 from ..model.facemodel import FaceModel
 from .blendshapes import read_blendshapes, recognised
+from .jaw import split_jaw
 from .curves import curve_set
 from .landmarks import ear_boxes, find_landmarks, template_landmarks
 from .openings import ACROSS, map_openings
@@ -94,7 +95,11 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     else:
         raw_V, raw_F = (np.asarray(a) for a in neutral)
         name = "target"
-    target = clean(raw_V, raw_F, name=name, unit=unit)
+    D = None
+    if blendshapes is not None:
+        say(f"reading blendshapes from {blendshapes}")
+        names, D = read_blendshapes(blendshapes, len(raw_V), np.asarray(raw_V, float))
+    target = clean(raw_V, raw_F, name=name, unit=unit, shapes=D)
     lap("clean")
     say(f"target: {len(target.vertices)} vertices, unit {target.unit}" +
         (f" ({'; '.join(target.notes)})" if target.notes else ""))
@@ -160,15 +165,17 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     model.scan_transform = A @ S
     # blendshapes
     solver = SurfacePoisson(template.neutral, template.triangles)
-    names, kinds = [], {}
+    kinds, jaw_split = {}, {}
     if blendshapes is not None:
-        say(f"importing blendshapes from {blendshapes}")
-        names, D = read_blendshapes(blendshapes, len(raw_V), np.asarray(raw_V, float))
+        say("importing the blendshapes")
         D = (D[:, target.source_ids] * target.scale) @ al.R.T          # model frame, metres
         model.blendshape_names = names
-        model.blendshapes = _transfer(D, surf, Fg, solver)
+        model.blendshapes, jaws, jaw_split = split_jaw(model, names, _transfer(D, surf, Fg, solver), surf.snapped)
         kinds = {n: recognised(n) for n in names}
-        model.meta["blendshape_jaw"] = {n: [0.0] * 6 for n in names}
+        model.meta["blendshape_jaw"] = jaws
+        for n, js in jaw_split.items():
+            say(f"{n}: jaw rotation {np.degrees(np.linalg.norm(js['jaw'][:3])):.1f} deg split out "
+                f"(mean offset {js['mean_before_mm']:.1f} -> {js['mean_after_mm']:.1f} mm)")
     elif expressions == "copy" and len(template.blendshape_names):
         model.blendshape_names = list(template.blendshape_names)
         model.blendshapes = template.blendshapes.copy()
@@ -202,6 +209,7 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
         "tet_relax_rounds": vm.relax_rounds, "quality": q,
         "centerlines_inside": inside_fraction(X1, tets, np.concatenate([m.centerline for m in muscles])),
         "blendshapes": {n: kinds.get(n) for n in model.blendshape_names} if blendshapes is not None else expressions,
+        "jaw_split": jaw_split,
     }
     model.meta = {**model.meta, "generator": "invface.morph", "source": str(target.name),
                   "template": {k: template.meta.get(k) for k in ("generator", "generator_version", "resolution")},

@@ -46,8 +46,12 @@ def detect_unit(V, name="target"):
                     "pass the unit explicitly (--unit) or rescale the file")
 
 
-def clean(V, F, name="target", unit=None):
-    """Clean a raw mesh (file units) into a Target in metres. Raises MeshError naming ``name``."""
+def clean(V, F, name="target", unit=None, shapes=None):
+    """Clean a raw mesh (file units) into a Target in metres. Raises MeshError naming ``name``.
+
+    shapes (K,n,3) file units, optional: the actor's blendshape offsets. Vertices that
+    coincide in the neutral but part in a shape (the two lips of a closed lip slit, when
+    jawOpen opens it) are not merged."""
     import trimesh
 
     V, F = np.asarray(V, float), np.asarray(F, np.int64)
@@ -64,8 +68,9 @@ def clean(V, F, name="target", unit=None):
         scale = UNITS[unit]
     V = V * scale
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
-    # duplicated vertices (within 1e-7 of the size): merge
-    key = np.round(V / (diag * 1e-7)).astype(np.int64)
+    # duplicated vertices (within 1e-7 of the size, in the neutral and every shape): merge
+    P = V if shapes is None else np.concatenate([V[None], V + np.asarray(shapes) * scale]).transpose(1, 0, 2)
+    key = np.round(P.reshape(len(V), -1) / (diag * 1e-7)).astype(np.int64)
     _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
     if len(first) < len(V):
         notes.append(f"merged {len(V) - len(first)} duplicated vertices")
