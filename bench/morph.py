@@ -4,7 +4,7 @@ rotated and written in millimetres), with the template's expressions re-simulate
 new anatomy. Also prints the round-trip accuracy: landmark errors against the template's
 landmarks carried by the known deformation, and the vertex correspondence error.
 
-    python bench/morph.py [--expressions simulate|copy] [--seed 1]
+    python bench/morph.py [--expressions simulate|copy|none] [--seed 1] [--resolution 1.0]
     python bench/morph.py --scan ../shared/data/ict-facekit/neutral.obj --expressions none
 
 With --scan, a real neutral scan is built instead (no ground truth: stage seconds, the
@@ -30,9 +30,10 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--expressions", default="simulate", choices=["simulate", "copy", "none"])
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--resolution", type=float, default=1.0, help="template size factor")
     ap.add_argument("--scan", help="a real neutral scan (OBJ/PLY) instead of the synthetic target")
     args = ap.parse_args()
-    tpl = invface.template.build()
+    tpl = invface.template.build(resolution=args.resolution)
     if args.scan:
         t0 = time.perf_counter()
         model, res = build_model(args.scan, template=tpl, expressions=args.expressions)

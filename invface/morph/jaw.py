@@ -12,10 +12,11 @@ shape is replaced by its unskinned remainder d_k: T(j_k)(n + d_k) equals the imp
 exactly, and j_k is stored as the shape's paired jaw (meta['blendshape_jaw']), as the
 template's own jawOpen has.
 
-Measured on ICT-FaceKit's jawOpen (small template morphed onto its neutral): the driven
-simulation at (jawOpen = 1, j_k) reproduces the imported shape to 3.1 mm mean (offsets up
-to 42 mm); a rigid fit of the chin skin instead (j = 0.41 rad with 18 mm of translation)
-gave 3.6 mm; unsplit (j = 0) the simulation does not converge.
+Measured on ICT-FaceKit's jawOpen (bench/jaw_split.py; small template morphed onto its
+neutral): j = 19 degrees about the hinge, and the driven simulation at (jawOpen = 1, j_k)
+follows the imported shape to 3.1 mm mean (offsets up to 42 mm); unsplit (j = 0) Newton
+does not converge. A rigid fit of the chin skin alone gave a jaw with 18 mm of translation
+that the simulation followed less closely.
 """
 from __future__ import annotations
 

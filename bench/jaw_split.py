@@ -1,0 +1,93 @@
+"""Imported jaw blendshapes: how much of each is the jaw, and how well the muscle simulation
+follows the rest (ICT-FaceKit, ../shared/data/ict-facekit).
+
+    python bench/jaw_split.py [--resolution 0.3] [--shapes jawOpen,jawLeft,jawForward,mouthSmile_L]
+
+Writes the ICT neutral's blendshapes as OBJ files (neutral + delta, the user's route), builds
+an actor with ``build-model --blendshapes`` semantics, and prints per shape: the split jaw
+(rotation in degrees, translation in mm), the mean offset over the fitted skin before and
+after the split, and the distance of the driven simulation at (shape = 1, its jaw) to the
+imported shape (mean / median / 95th percentile over the vertices the shape moves by > 1 mm).
+With ``--unsplit`` each jaw shape is also simulated as imported (the whole offset as the
+blendshape, jaw closed; the muscle tracks recomputed), as the builder did before the split.
+"""
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+import invface
+from invface.mesh.meshfile import read_mesh
+from invface.morph.build import build_model
+
+ICT = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--resolution", type=float, default=0.3, help="template size factor")
+    ap.add_argument("--shapes", default="jawOpen,jawLeft,jawForward,mouthSmile_L")
+    ap.add_argument("--unsplit", action="store_true", help="also simulate the jaw shapes unsplit")
+    a = ap.parse_args()
+    if not (ICT / "neutral.obj").exists():
+        raise SystemExit(f"{ICT}: ICT-FaceKit data not found")
+    V, F = read_mesh(ICT / "neutral.obj")
+    ex = np.load(ICT / "expressions.npz")
+    names = a.shapes.split(",")
+    tpl = invface.template.build(resolution=a.resolution, expressions=False)
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in names:
+            d = ex["deltas"][list(ex["names"]).index(n)]
+            trimesh.Trimesh(V + d, F, process=False).export(Path(tmp) / f"{n}.obj")
+        t0 = time.perf_counter()
+        model, res = build_model(ICT / "neutral.obj", blendshapes=tmp, template=tpl, expressions="none")
+    print(f"built in {time.perf_counter() - t0:.1f} s")
+    split, targets = res.stats["jaw_split"], {}
+    for n in names:
+        j = np.array(model.meta["blendshape_jaw"][n])
+        p = model.parameters({n: 1.0})
+        p[-6:] = j
+        target = model.surface_model("blendshape").surface(p)
+        t0 = time.perf_counter()
+        x = model.surface_model("simulation").surface(p)
+        sec = time.perf_counter() - t0
+        moved = np.linalg.norm(target - model.neutral, axis=1) > 0.001
+        e = np.linalg.norm(x - target, axis=1)[moved] * 1000
+        s = split.get(n)
+        head = (f"jaw {np.degrees(j[:3]).round(1).tolist()} deg, {(j[3:] * 1000).round(1).tolist()} mm; mean "
+                f"offset {s['mean_before_mm']:.2f} -> {s['mean_after_mm']:.2f} mm" if s else "not a jaw shape")
+        print(f"{n}: {head}; simulation vs imported {e.mean():.2f} / {np.median(e):.2f} / "
+              f"{np.quantile(e, 0.95):.2f} mm ({sec:.1f} s)")
+        if s:
+            targets[n] = target
+    for n, target in targets.items() if a.unsplit else ():
+        print(f"{n} unsplit: {unsplit(model, n, target)}")
+
+
+def unsplit(model, name, target):
+    """The simulation of shape ``name`` imported whole (jaw closed): its error, or the failure.
+    Changes ``model``'s blendshape and tracks in place."""
+    from invface.errors import InvfaceError
+    from invface.sim.driven import DrivenSimulation
+    from invface.sim.poisson import track_displacements
+    k = model.blendshape_names.index(name)
+    m = model
+    m.blendshapes[k] = target - m.neutral
+    m.track_displacements = track_displacements(m)
+    p = m.parameters({name: 1.0})
+    try:
+        x = DrivenSimulation(m).surface(p)
+    except InvfaceError as e:
+        return f"failed ({str(e).splitlines()[0][:90]})"
+    moved = np.linalg.norm(target - m.neutral, axis=1) > 0.001
+    err = np.linalg.norm(x - target, axis=1)[moved] * 1000
+    return f"simulation vs imported {err.mean():.2f} / {np.median(err):.2f} mm"
+
+
+if __name__ == "__main__":
+    main()
