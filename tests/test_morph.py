@@ -124,7 +124,7 @@ def test_real_scan_ict_neutral(small_model, tmp_path):
     target = model.surface_model("blendshape").surface(p)                       # the imported shape
     err = np.linalg.norm(model.surface_model("simulation").surface(p) - target, axis=1)
     moved = np.linalg.norm(target - model.neutral, axis=1) > 0.001
-    assert err[moved].mean() < 0.004, err[moved].mean()                         # 3.2 mm, offsets to 42
+    assert err[moved].mean() < 0.004, err[moved].mean()                         # 3.1 mm, offsets to 42
     assert (signed_volumes(model.rest_positions, model.tets) > 0).all()
     assert radius_ratio(model.rest_positions, model.tets).min() >= 0.005
     assert res.stats["centerlines_inside"] > 0.9
