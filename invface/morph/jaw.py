@@ -66,8 +66,10 @@ def split_jaw(model, names, deltas, known=None):
     if known is not None:
         use &= known
     out, jaws, stats = np.array(deltas, float), {k: [0.0] * 6 for k in names}, {}
+    if use.sum() < 10:                     # no skin carries the jaw: nothing to fit
+        return out, jaws, stats
     for k, name in enumerate(names):
-        if not is_jaw_shape(name) or use.sum() < 10:
+        if not is_jaw_shape(name):
             continue
         j = fit_jaw(model, n + out[k], use)
         before = np.linalg.norm(out[k][use], axis=1).mean()

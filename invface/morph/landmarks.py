@@ -173,9 +173,9 @@ def ear_boxes(V, F, L, grow=0.005):
     mask[ear] = True
     E = unique_edges(F)[0]
     label = edge_components(E[mask[E].all(1)], len(V))[ear]
+    regions = [V[ear[label == c]] for c in np.unique(label)]
     boxes = []
     for side, name in ((1, "head_extreme_L"), (-1, "head_extreme_R")):
-        regions = (V[ear[label == c]] for c in np.unique(label))
         parts = [P for P in regions if np.sign(P[:, 0].mean()) == side and np.ptp(P, axis=0).max() >= EAR_SIZE
                  and np.linalg.norm(P - L[name], axis=1).min() < EAR_REACH]
         if parts:

@@ -186,7 +186,7 @@ class Alignment:
         return np.asarray(P) @ self.R.T + self.t
 
 
-def _kabsch(A, B, w=None, scale=False):
+def kabsch(A, B, w=None, scale=False):
     """Rotation R (times a uniform scale when ``scale``; Umeyama), translation t minimising
     sum w |R A + t - B|^2 (A, B (n,3), w (n,))."""
     w = np.ones(len(A)) if w is None else w
@@ -212,7 +212,7 @@ def rigid_icp(P, V, F, R, t, iters=20, trim=2.5, weights=None, scale=False):
         med = float(np.median(d))
         keep = d <= trim * med + 1e-9
         C = barycentric_points(V, F, tri, w)
-        dR, dt = _kabsch(Q[keep], C[keep], weights[keep], scale)
+        dR, dt = kabsch(Q[keep], C[keep], weights[keep], scale)
         R, t = dR @ R, dR @ t + dt
         if np.linalg.norm(dR - np.eye(3)) < 1e-6 and np.linalg.norm(dt) < 1e-7:
             break

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .orient import kabsch
+
 
 def random_identity(neutral, seed, amplitude=0.004, bumps=8, width=0.03, stretch=0.04):
     """Deformed copy (V,3) m of ``neutral`` (V,3): a random anisotropic scale about the
@@ -42,6 +44,5 @@ def front_part(X, F, cut):
 def onto_part(X, ids, Q):
     """X (V,3) moved rigidly so that its part X[ids] lies best on Q (n,3) (least squares):
     a whole head carried into the frame where only its scanned part is known."""
-    P = X[ids]
-    U, _, Wt = np.linalg.svd((P - P.mean(0)).T @ (Q - Q.mean(0)))
-    return (X - P.mean(0)) @ (U @ Wt) + Q.mean(0)
+    R, t = kabsch(X[ids], Q)
+    return X @ R.T + t

@@ -33,6 +33,7 @@ from ..mesh.untangle import untangle
 from ..sim.poisson import outer_boundary
 
 MIN_DEPTH_FRACTION = 0.7     # inner surfaces keep at least this much of the template's tissue depth
+DEGENERATE = 1e-3            # radius ratio below which a morphed tet is unusable (builds: >= 0.009)
 
 
 @dataclass
@@ -79,9 +80,6 @@ def volume_displacement(model, surface_displacement, keep_depth=MIN_DEPTH_FRACTI
         fixed = np.concatenate([ids, inner])
         dX = harmonic(L, fixed, (X1 - X0)[fixed])
     return dX, ids, int(low.sum())
-
-
-DEGENERATE = 1e-3        # radius ratio below which a morphed tet is unusable (builds: >= 0.009)
 
 
 def _bad_tets(X, tets, min_radius_ratio):
