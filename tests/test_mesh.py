@@ -2,8 +2,9 @@ import numpy as np
 
 from meshes import box_tets
 
-from invface.mesh.tets import (boundary_faces, dihedral_angles, harmonic, laplacian, radius_ratio,
-                               signed_volumes)
+from invface.mesh.tets import (boundary_faces, dihedral_angles, harmonic, laplacian, locate, locate_near,
+                               radius_ratio, signed_volumes)
+from invface.mesh.triangles import covered_from_front
 
 REG = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float)
 
@@ -36,3 +37,29 @@ def test_boundary_faces_of_a_cube():
     n = np.cross(X[F[:, 1]] - X[F[:, 0]], X[F[:, 2]] - X[F[:, 0]])
     out = X[F].mean(1) - 0.5
     assert np.all(np.einsum("ij,ij->i", n, out) > 0)
+
+
+def test_locate_near_keeps_a_point_on_its_side_of_a_slit():
+    """Two slabs 2 mm apart (the lips of a closed slit): a point in the gap, nearer the lower
+    slab, is found in the lower slab by the plain search, but kept in the upper slab (the
+    side its start tet is on) by locate_near, with weights that still reproduce it."""
+    X, t = box_tets((3, 3, 2), (0.03, 0.03, 0.01))
+    upper = X + [0, 0, 0.011]
+    Xs, tets = np.concatenate([X, upper]), np.concatenate([t, t + len(X)])
+    p = np.array([[0.016, 0.014, 0.0104]])
+    t_plain, _ = locate(Xs, tets, p)
+    assert t_plain[0] < len(t)                                   # the lower slab: nearer
+    start = np.array([len(t) + int(np.argmin(np.linalg.norm(Xs[tets[len(t):]].mean(1) - p, axis=1)))])
+    t_near, w = locate_near(Xs, tets, p, start)
+    assert t_near[0] >= len(t)                                   # the upper slab
+    assert np.allclose(np.einsum("pk,pkj->pj", w, Xs[tets[t_near]]), p)
+    assert w.min() > -0.2                                        # the best tet near the start
+
+
+def test_covered_from_front_on_a_sphere():
+    """A closed sphere: the back half is covered along +z, the front half is not."""
+    import trimesh
+    s = trimesh.creation.icosphere(4, radius=0.1)
+    hidden = covered_from_front(s.vertices, s.faces)
+    nz = s.face_normals[:, 2]
+    assert hidden[nz < -0.02].all() and not hidden[nz > 0.02].any()

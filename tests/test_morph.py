@@ -10,7 +10,7 @@ from invface.morph.blendshapes import read_blendshapes, recognised
 from invface.morph.build import build_model
 from invface.morph.curvature import stencil_curvature
 from invface.morph.landmarks import template_landmarks
-from invface.morph.openings import OPENINGS, ordered_loops, split_loop
+from invface.morph.openings import OPENINGS, inner_surfaces, opening_centres, ordered_loops, split_loop
 from invface.morph.synthetic import front_part, onto_part, random_identity, random_pose
 from invface.morph.target import clean
 
@@ -102,7 +102,7 @@ def test_partial_scan_is_completed_from_the_template(small_expressive_model):
 
 
 def test_real_scan_ict_neutral(small_model, tmp_path):
-    """ICT-FaceKit's neutral (cm, with neck, ears, open eyes and parted lips; proportions
+    """ICT-FaceKit's neutral (cm, with neck, ears, open eyes, lips rolled into the mouth; proportions
     1-2 cm off the template's) builds a valid model with landmarks on its real features;
     its jawOpen blendshape is split into the jaw's rotation and a remainder that the muscle
     simulation follows."""
@@ -134,31 +134,73 @@ def test_real_scan_ict_neutral(small_model, tmp_path):
     # the nose tip is the scan's most forward point near the midline
     mid = np.abs(V[:, 0]) < 0.02
     assert np.linalg.norm(L["nose_tip"] - V[mid][np.argmax(V[mid, 2])]) < 0.002
-    # eye and mouth corners at the ends of the scan's openings, the stomion between the lips
-    holes = [V[h] for h in boundary_loops(F) if len(h) < 200]
+    # ICT's lips roll into the mouth and its lids into the sockets: the holes are at the back
+    # of the inner lips and lids. Those hidden surfaces are left out, so the openings are the
+    # lip line (closed) and the lid lines
+    assert any("inner lips" in note for note in res.target.notes)
+    holes = [res.aligned[h] for h in boundary_loops(res.target.faces) if len(h) < 200]
+    # eye and mouth corners at the ends of the openings, the stomion between the lips
     mouth = min(holes, key=lambda H: np.linalg.norm(H.mean(0) - L["stomion"]))
     for side, k in (("L", np.argmax), ("R", np.argmin)):
         assert np.linalg.norm(L[f"mouth_corner_{side}"] - mouth[k(mouth[:, 0])]) < 0.002
         eye = min(holes, key=lambda H: np.linalg.norm(H.mean(0) - L[f"eye_outer_{side}"]))
         assert np.linalg.norm(L[f"eye_outer_{side}"] - eye[np.argmax(np.abs(eye[:, 0]))]) < 0.002
         assert np.linalg.norm(L[f"eye_inner_{side}"] - eye[np.argmin(np.abs(eye[:, 0]))]) < 0.002
-    assert mouth[:, 1].min() <= L["stomion"][1] <= mouth[:, 1].max()
+    assert mouth[:, 1].min() - 0.001 <= L["stomion"][1] <= mouth[:, 1].max() + 0.001
     # the chin on the face (3-6 cm below the mouth), not at the base of the scan's neck
     assert 0.03 < L["stomion"][1] - L["chin"][1] < 0.06
     # the head's width measured on the skull, not across the ears (ears reach |x| > 8.5 cm)
     assert abs(L["head_extreme_L"][0]) < 0.085 and abs(L["head_extreme_R"][0]) < 0.085
-    # the template's closed lid and lip slits lie on the scan's rims, upper half on the upper
+    # the template's closed lid and lip slits lie on the openings, upper half on the upper
     # rim, so the skin is not torn there; the ears are boxed out, not snapped into stumps
     assert res.stats["openings_mapped"] == ["eye_L", "eye_R", "mouth"] and res.stats["ear_boxes"] == 2
-    rims = np.concatenate([V[h] for h in boundary_loops(F) if len(h) < 200])
+    rims = np.concatenate(holes)
     for name, (a, b) in OPENINGS.items():
         halves = next(h for lp in ordered_loops(small_model.triangles) if (h := split_loop(
             small_model.neutral, small_model.triangles, lp, res.template_landmarks[a], res.template_landmarks[b])))
         up, lo = (model.neutral[h] for h in halves)
         assert cKDTree(rims).query(np.concatenate([up, lo]))[0].max() < 0.0015, name
-        assert up[1:-1, 1].mean() > lo[1:-1, 1].mean() + 0.004, name       # opened, not crossed
+        gap = up[1:-1, 1].mean() - lo[1:-1, 1].mean()
+        assert (gap < 0.001) if name == "mouth" else (gap > 0.004), (name, gap)    # lips closed, eyes open
+    # the skin keeps to its side of the lips: each vertex is embedded in a tet that moves
+    # with the jaw as much as the vertex's own skinning weight says
+    vj = np.einsum("vk,vk->v", model.embed_weights, model.volume_jaw_weights[model.tets[model.embed_tets]])
+    assert np.abs(vj - model.jaw_weights).max() < 0.5
     assert np.abs(model.neutral[:, 0]).max() < 0.085
     assert res.stats["inverted_triangles"] < 40
+
+
+def test_inner_lips_behind_the_lip_line_are_left_out(small_model):
+    """A head whose lips roll into the mouth (as production heads such as ICT's do): strips of
+    skin run from the template's closed lip slit up and back into the upper lip and down and
+    back into the lower one, so the hole is behind the lips. inner_surfaces finds exactly the
+    strips (hidden from the front, joined to the hole), and without them the mouth's opening
+    is the lip line again. The template's own bare slits have nothing behind them."""
+    V, F = small_model.neutral, small_model.triangles
+    TL = template_landmarks(small_model)
+    up, lo = next(h for lp in ordered_loops(F) if (h := split_loop(V, F, lp, TL["mouth_corner_L"], TL["mouth_corner_R"])))
+
+    def with_strips():
+        """V, F with three rows of inner lip behind each half of the slit, 4 mm back each."""
+        Vs, Fs = [V], [F]
+        n = len(V)
+        for half, dy in ((up, 1.0), (lo, -1.0)):
+            rows = [half] + [n + k * len(half) + np.arange(len(half)) for k in range(3)]
+            for k in range(1, 4):
+                Vs.append(V[half] + k * np.array([0.0, 0.0015 * dy, -0.004]))
+            n += 3 * len(half)
+            for a, b in zip(rows[:-1], rows[1:]):
+                quad = np.stack([a[:-1], a[1:], b[1:], b[:-1]], 1)
+                tri = np.concatenate([quad[:, [0, 1, 2]], quad[:, [0, 2, 3]]])
+                Fs.append(tri if dy > 0 else tri[:, ::-1])
+        return np.concatenate(Vs), np.concatenate(Fs)
+
+    Vr, Fr = with_strips()
+    inner = inner_surfaces(Vr, Fr, opening_centres(TL))
+    assert inner[len(F):].all() and not inner[:len(F)].any()
+    loops = ordered_loops(Fr[~inner])
+    assert any(split_loop(Vr, Fr[~inner], lp, TL["mouth_corner_L"], TL["mouth_corner_R"]) for lp in loops)
+    assert not inner_surfaces(V, F, opening_centres(TL)).any()          # the template: bare slits
 
 
 def test_stencil_curvature_of_a_sphere():

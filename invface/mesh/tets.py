@@ -163,3 +163,27 @@ def locate(X, tets, points, k=32):
     best = np.argmax(bary.min(2), axis=1)
     rows = np.arange(len(points))
     return cand[rows, best], bary[rows, best]
+
+
+def locate_near(X, tets, points, start, rings=1):
+    """Like ``locate``, but each point's candidates are the tets within ``rings`` vertex-rings
+    of its tet ``start`` (P,) in the same mesh: a point keeps to its own side of a slit (lips,
+    eyelids) that closes up in space. Returns tet ids (P,) and barycentric weights (P,4)."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    T, N = len(tets), len(X)
+    M = sp.csr_matrix((np.ones(tets.size), (np.repeat(np.arange(T), 4), tets.ravel())), shape=(T, N))
+    C = sp.csr_matrix((np.ones(len(points)), (np.arange(len(points)), start)), shape=(len(points), T))
+    for _ in range(rings):
+        C = ((C @ M) @ M.T).tocsr()
+    C.sum_duplicates()
+    pid = np.repeat(np.arange(len(points)), np.diff(C.indptr))
+    cand = C.indices
+    score = np.empty(len(cand))
+    for s in range(0, len(cand), 1 << 20):          # chunks bound the 3x3 solves' memory
+        sl = slice(s, s + (1 << 20))
+        score[sl] = barycentric(X, tets, cand[sl], points[pid[sl]]).min(1)
+    # per point, the candidate with the largest minimum weight
+    order = np.lexsort((-score, pid))
+    first = order[np.r_[0, np.flatnonzero(np.diff(pid[order])) + 1]]
+    t = cand[first]
+    return t, barycentric(X, tets, t, points)

@@ -68,3 +68,50 @@ def boundary_loops(faces):
     ids, local = np.unique(b, return_inverse=True)
     lab = edge_components(local, len(ids))
     return [ids[lab == i] for i in range(lab.max() + 1)]
+
+
+def covered_from_front(X, faces, eps=1e-6):
+    """Boolean (F,) of triangles whose centroid is hidden along +z: a ray from it towards +z
+    hits another triangle more than ``eps`` (m) in front. X (N,3) m, faces (F,3).
+
+    The triangles are binned by their xy bounding boxes on a grid of about two median edge
+    lengths; each centroid is tested against the triangles of its cell (2D barycentric
+    inside test, then the depth of the plane there)."""
+    X, faces = np.asarray(X, float), np.asarray(faces, np.int64)
+    P = X[faces]                                            # (F,3,3)
+    c = P.mean(1)
+    h = 2.0 * float(np.median(np.linalg.norm(P[:, 0] - P[:, 1], axis=1)))
+    lo, hi = np.floor(P[..., :2].min(1) / h).astype(np.int64), np.floor(P[..., :2].max(1) / h).astype(np.int64)
+    base = lo.min(0)
+    lo, hi = lo - base, hi - base
+    ny = int(hi[:, 1].max()) + 1
+    span = hi - lo + 1
+    # every triangle in each cell its box overlaps
+    count = span[:, 0] * span[:, 1]
+    tri = np.repeat(np.arange(len(faces)), count)
+    k = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    cell = (lo[tri, 0] + k // span[tri, 1]) * ny + lo[tri, 1] + k % span[tri, 1]
+    order = np.argsort(cell, kind="stable")
+    cell, tri = cell[order], tri[order]
+    q = (np.floor(c[:, :2] / h).astype(np.int64) - base)
+    qcell = q[:, 0] * ny + q[:, 1]
+    start, stop = np.searchsorted(cell, qcell, "left"), np.searchsorted(cell, qcell, "right")
+    n = stop - start
+    pid = np.repeat(np.arange(len(faces)), n)
+    cand = tri[np.repeat(start, n) + np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)]
+    keep = cand != pid
+    pid, cand = pid[keep], cand[keep]
+    a, b, d = P[cand, 0], P[cand, 1], P[cand, 2]
+    p = c[pid]
+    e1, e2, r = b[:, :2] - a[:, :2], d[:, :2] - a[:, :2], p[:, :2] - a[:, :2]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    ok = np.abs(det) > 1e-30
+    det = np.where(ok, det, 1.0)
+    u = (r[:, 0] * e2[:, 1] - r[:, 1] * e2[:, 0]) / det
+    v = (e1[:, 0] * r[:, 1] - e1[:, 1] * r[:, 0]) / det
+    inside = ok & (u >= 0) & (v >= 0) & (u + v <= 1)
+    z = a[:, 2] + u * (b[:, 2] - a[:, 2]) + v * (d[:, 2] - a[:, 2])
+    hit = inside & (z > p[:, 2] + eps)
+    out = np.zeros(len(faces), bool)
+    out[pid[hit]] = True
+    return out

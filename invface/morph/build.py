@@ -23,16 +23,16 @@ import numpy as np
 from ..errors import ConfigError, MeshError
 from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.meshfile import read_mesh
-from ..mesh.tets import locate, quality_summary
+from ..mesh.tets import locate_near, quality_summary
 from ..model.facemodel import FaceModel
 from .blendshapes import read_blendshapes, recognised
 from .jaw import split_jaw
 from .curves import curve_set
 from .landmarks import ear_boxes, find_landmarks, template_landmarks
-from .openings import ACROSS, map_openings
+from .openings import ACROSS, inner_surfaces, map_openings, opening_centres
 from .orient import align_to_template
 from .surface import SurfacePoisson, morph_surface
-from .target import Target, clean
+from .target import Target, clean, drop_faces
 from .volume import carry_fibers, carry_points, inside_fraction, morph_volume
 
 EXPRESSIONS = ("simulate", "copy", "none")
@@ -106,15 +106,20 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
 
     say("orientation, symmetry plane and alignment to the template")
     al = align_to_template(target.vertices, target.faces, template)
-    Va, Fg = al.apply(target.vertices), target.faces
     if al.residual > 0.01:
         raise MeshError(f"{target.name}: after alignment the scan lies {al.residual * 1000:.1f} mm (median) from "
                         "the template's face; it does not look like a face, or too little of one")
+    TL = template_landmarks(template)
+    inner = inner_surfaces(al.apply(target.vertices), target.faces, opening_centres(TL))
+    if inner.any():
+        target = drop_faces(target, inner, f"left out {int(inner.sum())} triangles of the inner lips and lids, "
+                                           "hidden behind the lip and lid lines")
+        say(target.notes[-1])
+    Va, Fg = al.apply(target.vertices), target.faces
     lap("orient")
 
     say("landmarks (fixed-stencil curvature)")
     L, off_scan = find_landmarks(Va, Fg, template)
-    TL = template_landmarks(template)
     if off_scan:
         say(f"partial scan: {', '.join(off_scan)} off the scan (on its edge); their curves are left out and "
             "the head is completed from the template")
@@ -147,7 +152,7 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     cranium = (carry_points(X0, X1, tets, template.cranium_mesh[0]), template.cranium_mesh[1])
     jaw = (carry_points(X0, X1, tets, template.jaw_mesh[0]), template.jaw_mesh[1])
     pivot = carry_points(X0, X1, tets, template.jaw_pivot)[0]
-    et, ew = locate(X1, tets, surf.positions)
+    et, ew = locate_near(X1, tets, surf.positions, template.embed_tets)   # each skin vertex stays on its side of the lips
     lap("volume")
 
     model = FaceModel(

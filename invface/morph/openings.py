@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh.sections import arc_length, resample, walk_chains
-from ..mesh.triangles import boundary_edges
+from ..mesh.triangles import boundary_edges, boundary_loops, covered_from_front, edge_components, unique_edges
 
 # the openings and the landmarks at their ends
 OPENINGS = {"eye_L": ("eye_inner_L", "eye_outer_L"), "eye_R": ("eye_inner_R", "eye_outer_R"),
@@ -23,6 +23,56 @@ OPENINGS = {"eye_L": ("eye_inner_L", "eye_outer_L"), "eye_R": ("eye_inner_R", "e
 ACROSS = {"eye_L": (("eye_inner_L", "eye_outer_L"),), "eye_R": (("eye_inner_R", "eye_outer_R"),),
           "mouth": (("mouth_corner_L", "stomion"), ("stomion", "mouth_corner_R"))}
 CORNER_TOL = 0.003      # m: a loop belongs to an opening when it passes this close to both corners
+OPENING_REACH = 0.035   # m: a scan's hole is an eye or mouth opening when it comes this close
+                        #    to the template's (the scan is aligned to the template)
+MAX_INNER_FRACTION = 0.25   # more hidden skin than this behind the openings: not trimmed
+
+
+def opening_centres(TL):
+    """(k,3) midpoints of the corners of each opening in OPENINGS, from landmarks TL."""
+    return np.array([0.5 * (np.asarray(TL[a]) + np.asarray(TL[b])) for a, b in OPENINGS.values()])
+
+
+def inner_surfaces(V, F, centres, reach=OPENING_REACH):
+    """Boolean (f,) of the scan's triangles behind its eye and mouth openings.
+
+    Production heads (ICT-FaceKit, game rigs) model the lips rolling into the mouth and the
+    lids into the sockets: the hole is at the back of the inner lip, behind a closed lip
+    line, not at the lip line that the template's slit stands for. These inner surfaces are
+    the triangles hidden from the front (+z, the aligned scan looks along +z) and connected,
+    through hidden triangles, to a hole that comes within ``reach`` of one of the template's
+    opening ``centres`` (k,3); the outermost boundary (the widest loop: neck or scan edge)
+    is never one. What is left has its hole at the visible lip and lid line (paper 001
+    sec. 7: the mouth occlusion curve). V (n,3) aligned scan, F (f,3)."""
+    F = np.asarray(F, np.int64)
+    loops = boundary_loops(F)
+    out = np.zeros(len(F), bool)
+    if len(loops) < 2:
+        return out
+    longest = max(range(len(loops)), key=lambda i: np.ptp(V[loops[i]], axis=0).sum())
+    centres = np.reshape(centres, (-1, 3))
+    rim = np.zeros(len(V), bool)
+    for i, lp in enumerate(loops):
+        if i != longest and (np.linalg.norm(V[lp][:, None] - centres[None], axis=2).min() < reach):
+            rim[lp] = True
+    if not rim.any():
+        return out
+    hidden = covered_from_front(V, F)
+    edges, tri_edges = unique_edges(F)
+    # hidden triangles joined across shared edges; the pieces that touch an opening's rim
+    owner = np.full((len(edges), 2), -1)
+    flat = tri_edges.ravel()
+    tri = np.repeat(np.arange(len(F)), 3)
+    first = np.ones(len(flat), bool)
+    order = np.argsort(flat, kind="stable")
+    first[order[1:]] = flat[order[1:]] != flat[order[:-1]]
+    owner[flat[first], 0], owner[flat[~first], 1] = tri[first], tri[~first]
+    pair = owner[(owner >= 0).all(1)]
+    pair = pair[hidden[pair].all(1)]
+    lab = edge_components(pair, len(F))
+    seed = hidden & rim[F].any(1)
+    out = hidden & np.isin(lab, lab[seed])
+    return out if out.mean() <= MAX_INNER_FRACTION else np.zeros(len(F), bool)
 
 
 def ordered_loops(faces):

@@ -35,6 +35,15 @@ class Target:
     notes: list = field(default_factory=list)
 
 
+def drop_faces(target, drop, note):
+    """The Target without the triangles ``drop`` (f,) bool and the vertices only they used;
+    ``note`` is added to its notes."""
+    F = target.faces[~np.asarray(drop, bool)]
+    used, inv = np.unique(F, return_inverse=True)
+    return Target(target.vertices[used], inv.reshape(-1, 3), target.unit, target.scale,
+                  target.source_ids[used], target.name, target.notes + [note])
+
+
 def detect_unit(V, name="target"):
     """(unit name, metres per unit) that makes the mesh's diagonal a plausible head size."""
     diag = float(np.linalg.norm(V.max(0) - V.min(0)))
