@@ -8,6 +8,8 @@ an actor with ``build-model --blendshapes`` semantics, and prints per shape: the
 (rotation in degrees, translation in mm), the mean offset over the fitted skin before and
 after the split, and the distance of the driven simulation at (shape = 1, its jaw) to the
 imported shape (mean / median / 95th percentile over the vertices the shape moves by > 1 mm).
+Each line also gives the deepest penetration of the solved state's contacts (flesh on flesh,
+on the cranium, on the jaw); ``--no-contact`` adds the simulation without collision penalties.
 With ``--unsplit`` each jaw shape is also simulated as imported (the whole offset as the
 blendshape, jaw closed; the muscle tracks recomputed), as the builder did before the split.
 """
@@ -24,6 +26,7 @@ import trimesh
 import invface
 from invface.mesh.meshfile import read_mesh
 from invface.morph.build import build_model
+from invface.sim.driven import DrivenSimulation
 
 ICT = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit"
 
@@ -33,6 +36,7 @@ def main():
     ap.add_argument("--resolution", type=float, default=0.3, help="template size factor")
     ap.add_argument("--shapes", default="jawOpen,jawLeft,jawForward,mouthSmile_L")
     ap.add_argument("--unsplit", action="store_true", help="also simulate the jaw shapes unsplit")
+    ap.add_argument("--no-contact", action="store_true", help="also simulate without collision penalties")
     a = ap.parse_args()
     if not (ICT / "neutral.obj").exists():
         raise SystemExit(f"{ICT}: ICT-FaceKit data not found")
@@ -48,32 +52,49 @@ def main():
         model, res = build_model(ICT / "neutral.obj", blendshapes=tmp, template=tpl, expressions="none")
     print(f"built in {time.perf_counter() - t0:.1f} s")
     split, targets = res.stats["jaw_split"], {}
+    sim = DrivenSimulation(model)
+    free = DrivenSimulation(model, contact=False) if a.no_contact else None
     for n in names:
         j = np.array(model.meta["blendshape_jaw"][n])
         p = model.parameters({n: 1.0})
         p[-6:] = j
         target = model.surface_model("blendshape").surface(p)
-        t0 = time.perf_counter()
-        x = model.surface_model("simulation").surface(p)
-        sec = time.perf_counter() - t0
         moved = np.linalg.norm(target - model.neutral, axis=1) > 0.001
-        e = np.linalg.norm(x - target, axis=1)[moved] * 1000
+        t0 = time.perf_counter()
+        r = sim.solve(p)
+        sec = time.perf_counter() - t0
+        e = np.linalg.norm(sim.surface_of(r) - target, axis=1)[moved] * 1000
         s = split.get(n)
         head = (f"jaw {np.degrees(j[:3]).round(1).tolist()} deg, {(j[3:] * 1000).round(1).tolist()} mm; mean "
                 f"offset {s['mean_before_mm']:.2f} -> {s['mean_after_mm']:.2f} mm" if s else "not a jaw shape")
         print(f"{n}: {head}; simulation vs imported {e.mean():.2f} / {np.median(e):.2f} / "
-              f"{np.quantile(e, 0.95):.2f} mm ({sec:.1f} s)")
+              f"{np.quantile(e, 0.95):.2f} mm ({sec:.1f} s); {deepest(r)}")
+        if a.no_contact:
+            e = np.linalg.norm(free.surface(p) - target, axis=1)[moved] * 1000
+            print(f"    without contacts: {e.mean():.2f} / {np.median(e):.2f} / {np.quantile(e, 0.95):.2f} mm")
         if s:
             targets[n] = target
     for n, target in targets.items() if a.unsplit else ():
         print(f"{n} unsplit: {unsplit(model, n, target)}")
 
 
+def deepest(result):
+    """The deepest penetration (mm) of the solved state's contacts: flesh on flesh, flesh on
+    the cranium (upper teeth), flesh on the jaw (lower teeth)."""
+    c = result.sim.contacts
+    if c is None or not len(c.v):
+        return "no contacts"
+    g = -c.gaps(result.X) * 1000
+    flesh = (c.u >= 0).any(1)
+    jaw = c.moves & ~flesh
+    kinds = {"flesh": flesh, "cranium": ~flesh & ~jaw, "jaw": jaw}
+    return "deepest contact " + ", ".join(f"{k} {max(g[m].max(initial=0), 0):.1f}" for k, m in kinds.items()) + " mm"
+
+
 def unsplit(model, name, target):
     """The simulation of shape ``name`` imported whole (jaw closed): its error, or the failure.
     Changes ``model``'s blendshape and tracks in place."""
     from invface.errors import InvfaceError
-    from invface.sim.driven import DrivenSimulation
     from invface.sim.poisson import track_displacements
     k = model.blendshape_names.index(name)
     m = model
