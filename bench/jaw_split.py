@@ -10,7 +10,7 @@ after the split, and the distance of the driven simulation at (shape = 1, its ja
 imported shape (mean / median / 95th percentile over the vertices the shape moves by > 1 mm).
 Each line also gives the deepest penetration of the solved state's contacts (flesh on flesh,
 on the cranium, on the jaw); ``--no-contact`` adds the simulation without collision penalties.
-With ``--unsplit`` each jaw shape is also simulated as imported (the whole offset as the
+The template's own jawOpen is given for comparison. With ``--unsplit`` each jaw shape is also simulated as imported (the whole offset as the
 blendshape, jaw closed; the muscle tracks recomputed), as the builder did before the split.
 """
 from __future__ import annotations
@@ -74,6 +74,10 @@ def main():
             print(f"    without contacts: {e.mean():.2f} / {np.median(e):.2f} / {np.quantile(e, 0.95):.2f} mm")
         if s:
             targets[n] = target
+    own = invface.template.build(resolution=a.resolution)          # with its simulated expressions
+    p = own.parameters({"jawOpen": 1.0})
+    p[-6:] = own.meta["blendshape_jaw"]["jawOpen"]
+    print(f"the template's own jawOpen (simulated when it was built): {deepest(DrivenSimulation(own).solve(p))}")
     for n, target in targets.items() if a.unsplit else ():
         print(f"{n} unsplit: {unsplit(model, n, target)}")
 
