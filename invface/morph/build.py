@@ -29,7 +29,7 @@ from .blendshapes import read_blendshapes, recognised
 from .jaw import split_jaw
 from .curves import curve_set
 from .landmarks import ear_boxes, find_landmarks, template_landmarks
-from .openings import ACROSS, inner_surfaces, map_openings, opening_centres
+from .openings import ACROSS, MAX_INNER_FRACTION, inner_surfaces, map_openings, opening_centres
 from .orient import align_to_template
 from .surface import SurfacePoisson, morph_surface
 from .target import Target, clean, drop_faces
@@ -111,7 +111,10 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
                         "the template's face; it does not look like a face, or too little of one")
     TL = template_landmarks(template)
     inner = inner_surfaces(al.apply(target.vertices), target.faces, opening_centres(TL))
-    if inner.any():
+    if inner.mean() > MAX_INNER_FRACTION:
+        say(f"{inner.mean():.0%} of the scan is hidden behind its openings: too much to be inner lips and "
+            "lids, all kept")
+    elif inner.any():
         target = drop_faces(target, inner, f"left out {int(inner.sum())} triangles of the inner lips and lids, "
                                            "hidden behind the lip and lid lines")
         say(target.notes[-1])

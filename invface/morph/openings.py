@@ -25,7 +25,7 @@ ACROSS = {"eye_L": (("eye_inner_L", "eye_outer_L"),), "eye_R": (("eye_inner_R", 
 CORNER_TOL = 0.003      # m: a loop belongs to an opening when it passes this close to both corners
 OPENING_REACH = 0.035   # m: a scan's hole is an eye or mouth opening when it comes this close
                         #    to the template's (the scan is aligned to the template)
-MAX_INNER_FRACTION = 0.25   # more hidden skin than this behind the openings: not trimmed
+MAX_INNER_FRACTION = 0.25   # more hidden skin than this behind the openings: not left out
 
 
 def opening_centres(TL):
@@ -71,8 +71,7 @@ def inner_surfaces(V, F, centres, reach=OPENING_REACH):
     pair = pair[hidden[pair].all(1)]
     lab = edge_components(pair, len(F))
     seed = hidden & rim[F].any(1)
-    out = hidden & np.isin(lab, lab[seed])
-    return out if out.mean() <= MAX_INNER_FRACTION else np.zeros(len(F), bool)
+    return hidden & np.isin(lab, lab[seed])
 
 
 def ordered_loops(faces):
