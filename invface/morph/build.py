@@ -1,9 +1,10 @@
 """Build a simulatable FaceModel for a new actor by morphing the template (paper 001).
 
 Pipeline: clean the scan (target.py) -> orientation, symmetry and rigid alignment to the
-template (orient.py) -> fixed-stencil curvature and landmarks (curvature.py, landmarks.py)
--> feature curves (curves.py) -> surface Poisson morph, snapping, inverted-triangle
-relaxation, partial-scan completion (surface.py) -> volumetric morph of flesh, bones,
+template (orient.py); inner lips and lids behind the openings left out (openings.py) ->
+fixed-stencil curvature and landmarks (curvature.py, landmarks.py) -> feature curves
+(curves.py) -> surface Poisson morph, snapping, inverted-triangle relaxation, partial-scan
+completion (surface.py) -> volumetric morph of flesh, bones,
 muscles, relaxation of bad tets (volume.py) -> blendshapes (imported from the actor's files
 with the jaw's rotation split out of the jaw shapes (jaw.py), or the template's expressions
 re-simulated on the new anatomy, or copied) -> muscle-track precompute (paper 000 Eq. 10-11).

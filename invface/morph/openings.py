@@ -8,6 +8,10 @@ half of the template's slit is mapped onto the matching half of the scan's rim, 
 corner by normalised arc length; these are Dirichlet data of the surface morph and the
 positions the snap keeps (paper 001 sec. 8: curves drive the morph; the rims are the
 scan's hard eye and lip curves).
+
+Before that, a scan whose lips roll into the mouth and lids into the sockets (production
+heads) has those inner surfaces left out (``inner_surfaces``), so its rims are the lip and
+lid lines, not holes at the back of the inner lips.
 """
 from __future__ import annotations
 
@@ -49,17 +53,18 @@ def inner_surfaces(V, F, centres, reach=OPENING_REACH):
     out = np.zeros(len(F), bool)
     if len(loops) < 2:
         return out
-    longest = max(range(len(loops)), key=lambda i: np.ptp(V[loops[i]], axis=0).sum())
+    outer = max(range(len(loops)), key=lambda i: np.ptp(V[loops[i]], axis=0).sum())
     centres = np.reshape(centres, (-1, 3))
     rim = np.zeros(len(V), bool)
     for i, lp in enumerate(loops):
-        if i != longest and (np.linalg.norm(V[lp][:, None] - centres[None], axis=2).min() < reach):
+        if i != outer and (np.linalg.norm(V[lp][:, None] - centres[None], axis=2).min() < reach):
             rim[lp] = True
     if not rim.any():
         return out
     hidden = covered_from_front(V, F)
     edges, tri_edges = unique_edges(F)
-    # hidden triangles joined across shared edges; the pieces that touch an opening's rim
+    # the two triangles of each interior edge; hidden pairs join, and the pieces that touch an
+    # opening's rim are the inner surfaces
     owner = np.full((len(edges), 2), -1)
     flat = tri_edges.ravel()
     tri = np.repeat(np.arange(len(F)), 3)
