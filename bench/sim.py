@@ -10,7 +10,6 @@ import argparse
 import resource
 import time
 
-
 import invface
 from invface.sim.quasistatic import Simulator
 

@@ -70,6 +70,13 @@ def boundary_loops(faces):
     return [ids[lab == i] for i in range(lab.max() + 1)]
 
 
+def group_offsets(counts):
+    """Position (sum(counts),) of each item within its group, for groups of ``counts`` (G,)
+    items laid end to end: [0..counts[0]-1, 0..counts[1]-1, ...]."""
+    counts = np.asarray(counts, np.int64)
+    return np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+
+
 def covered_from_front(X, faces, eps=1e-6):
     """Boolean (F,) of triangles whose centroid is hidden along +z: a ray from it towards +z
     hits another triangle more than ``eps`` (m) in front. X (N,3) m, faces (F,3).
@@ -89,7 +96,7 @@ def covered_from_front(X, faces, eps=1e-6):
     # every triangle in each cell its box overlaps
     count = span[:, 0] * span[:, 1]
     tri = np.repeat(np.arange(len(faces)), count)
-    k = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    k = group_offsets(count)
     cell = (lo[tri, 0] + k // span[tri, 1]) * ny + lo[tri, 1] + k % span[tri, 1]
     order = np.argsort(cell, kind="stable")
     cell, tri = cell[order], tri[order]
@@ -98,7 +105,7 @@ def covered_from_front(X, faces, eps=1e-6):
     start, stop = np.searchsorted(cell, qcell, "left"), np.searchsorted(cell, qcell, "right")
     n = stop - start
     pid = np.repeat(np.arange(len(faces)), n)
-    cand = tri[np.repeat(start, n) + np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)]
+    cand = tri[np.repeat(start, n) + group_offsets(n)]
     keep = cand != pid
     pid, cand = pid[keep], cand[keep]
     a, b, d = P[cand, 0], P[cand, 1], P[cand, 2]

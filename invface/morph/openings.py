@@ -63,18 +63,11 @@ def inner_surfaces(V, F, centres, reach=OPENING_REACH):
         return out
     hidden = covered_from_front(V, F)
     edges, tri_edges = unique_edges(F)
-    # the two triangles of each interior edge; hidden pairs join, and the pieces that touch an
-    # opening's rim are the inner surfaces
-    owner = np.full((len(edges), 2), -1)
-    flat = tri_edges.ravel()
-    tri = np.repeat(np.arange(len(F)), 3)
-    first = np.ones(len(flat), bool)
-    order = np.argsort(flat, kind="stable")
-    first[order[1:]] = flat[order[1:]] != flat[order[:-1]]
-    owner[flat[first], 0], owner[flat[~first], 1] = tri[first], tri[~first]
-    pair = owner[(owner >= 0).all(1)]
-    pair = pair[hidden[pair].all(1)]
-    lab = edge_components(pair, len(F))
+    # hidden triangles joined through their shared edges (a graph of triangle and edge
+    # nodes); the pieces that touch an opening's rim are the inner surfaces
+    hid = np.flatnonzero(hidden)
+    links = np.stack([np.repeat(hid, 3), len(F) + tri_edges[hid].ravel()], 1)
+    lab = edge_components(links, len(F) + len(edges))[:len(F)]
     seed = hidden & rim[F].any(1)
     return hidden & np.isin(lab, lab[seed])
 

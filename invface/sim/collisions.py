@@ -33,7 +33,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..mesh.tets import boundary_faces
-from ..mesh.triangles import vertex_normals
+from ..mesh.triangles import group_offsets, vertex_normals
 
 CONTACT_SMOOTHING = 2e-5     # m: the cubic onset of the contact penalty
 
@@ -215,7 +215,7 @@ class Collisions:
         slot = np.zeros(len(pairs), np.int64)
         order = np.argsort(inv, kind="stable")
         counts = np.bincount(inv, minlength=len(self.self_vertices))
-        slot[order] = np.arange(len(pairs)) - np.repeat(np.cumsum(counts) - counts, counts)
+        slot[order] = group_offsets(counts)
         self.partners = np.full((len(self.self_vertices), counts.max(initial=0)), -1, np.int64)
         self.partners[inv, slot] = pairs[:, 1]
         self.radius = radius
