@@ -17,7 +17,11 @@ Two correspondence modes:
   model parts toward scan parts that no model vertex sees yet (a jaw opened by centimetres).
   Pairs that land on the other mesh's open boundary, or farther than the gate, are dropped;
   the gate starts at ``start_distance`` and halves each round down to ``max_distance``; pairs
-  are refreshed between dogleg rounds until they stop changing.
+  are refreshed between dogleg rounds until they stop changing. ICP only sees the scan within
+  its gate, and a jaw opened by centimetres stalls it part way open (ICT-FaceKit's jawOpen:
+  0.08 rad of the scan's 0.3). So, unless a start ``p0`` is given, the jaw's opening starts
+  at the best of a coarse search: the hinge angle whose blendshape-rig surface has the least
+  symmetric distance to the scan, each distance capped at ``max_distance``.
 """
 from __future__ import annotations
 
@@ -131,6 +135,40 @@ class _Objective:
         return np.r_[r, reg], np.vstack([J, Jreg])
 
 
+JAW_SEARCH = np.arange(0.0, JAW_UPPER[0] + 1e-9, 0.1)     # rad: hinge openings tried, then +-0.05
+
+
+def capped_distance(model_surface, triangles, scan, scan_faces, cap, model_border, scan_border):
+    """Symmetric nearest-point distance (m^2) between a posed model surface (V,3) and a scan
+    (S,3): the squared distance from each model vertex to the scan plus that from each scan
+    vertex to the model, each capped at ``cap`` (m), pairs landing on the other mesh's open
+    boundary left out."""
+    q, _, _, _, edge = _closest(scan, scan_faces, model_surface, scan_border)
+    qb, _, _, _, edgeb = _closest(model_surface, triangles, scan, model_border)
+    d = np.r_[np.linalg.norm(model_surface - q, axis=1)[~edge],
+              np.linalg.norm(scan - qb, axis=1)[~edgeb]]
+    return float(np.sum(np.minimum(d, cap) ** 2))
+
+
+def search_jaw(model, z, scan, scan_faces, cap, model_border, scan_border):
+    """The hinge opening (rad) for z = (p, theta, t) that brings the blendshape rig closest to
+    the scan (``capped_distance``): JAW_SEARCH, then +-0.05 rad about the best."""
+    sm, K, P = model.surface_model("blendshape"), len(model.blendshape_names), len(z) - 6
+
+    def cost(h):
+        zz = z.copy()
+        zz[K] = h
+        return capped_distance(posed_surface(sm, zz, P)[1], model.triangles, scan, scan_faces,
+                               cap, model_border, scan_border)
+
+    costs = {float(h): cost(h) for h in JAW_SEARCH}
+    best = min(costs, key=costs.get)
+    for h in (best - 0.05, best + 0.05):
+        if JAW_LOWER[0] <= h <= JAW_UPPER[0]:
+            costs[h] = cost(h)
+    return min(costs, key=costs.get)
+
+
 def _closest(V, F, points, border=None):
     """Closest points (N,3) on the mesh (V, F), its unit face normals there (N,3), the
     triangles (N,) and barycentrics (N,3), and whether each lies on an open boundary edge
@@ -148,7 +186,8 @@ def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="cor
     """Fit controls and rigid pose of ``model`` to a scan (metres). Returns a ScanFit.
 
     scan_vertices (S,3); scan_faces (G,3) (needed in ``nearest`` mode); kind: "blendshape"
-    or "simulation"; p0 (K+6,) start (default neutral); rotation/translation: start pose."""
+    or "simulation"; p0 (K+6,) start (default neutral, in nearest mode with
+    the jaw opening from ``search_jaw``); rotation/translation: start pose."""
     S = np.asarray(scan_vertices, float)
     V = len(model.neutral)
     if mode not in ("correspondence", "nearest"):
@@ -181,6 +220,9 @@ def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="cor
     else:
         F, Fm = np.asarray(scan_faces), model.triangles
         scan_border, model_border = boundary_vertices(F, len(S)), boundary_vertices(Fm, V)
+        if p0 is None:
+            z[len(model.blendshape_names)] = search_jaw(model, z, S, F, max_distance,
+                                                        model_border, scan_border)
         status, last = "rounds", None
         for rnd in range(rounds):
             gate = max(max_distance, start_distance * 0.5 ** rnd)
