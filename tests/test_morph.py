@@ -266,13 +266,16 @@ def test_blendshape_import(tmp_path):
 
 def test_jaw_split_recovers_the_skinning(small_model):
     """A jaw shape made by the rig's own skinning (plus a lip offset) is split back into its
-    jaw parameters and a remainder that the rig turns into exactly the imported shape."""
-    from invface.model.rig import skin
+    jaw parameters and a remainder that the rig turns into exactly the imported shape; a jaw
+    beyond the range that fits keep to is split at that range."""
+    from invface.model.rig import JAW_LOWER, JAW_UPPER, skin
     from invface.morph.jaw import fit_jaw, is_jaw_shape, split_jaw
     m = small_model
     n, w = m.neutral, m.jaw_weights
     j0 = np.array([0.2, 0.02, -0.01, 0.0, 0.002, 0.001])
     assert np.allclose(fit_jaw(m, skin(n, w, m.jaw_matrix(j0)), w > 0), j0, atol=1e-7)
+    far = fit_jaw(m, skin(n, w, m.jaw_matrix(j0 + [0, 0, 0, 0, 0, 0.01])), w > 0)   # 11 mm forward
+    assert abs(far[5] - JAW_UPPER[5]) < 1e-9 and np.all(far >= JAW_LOWER) and np.all(far <= JAW_UPPER)
     lip = n[m.landmarks["stomion"]]
     bump = 0.002 * np.exp(-np.sum((n - lip) ** 2, 1) / (2 * 0.01 ** 2))[:, None] * np.array([0, -1.0, 0.5])
     shape = skin(n + bump, w, m.jaw_matrix(j0))

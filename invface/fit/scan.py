@@ -33,7 +33,7 @@ import numpy as np
 from ..errors import InvfaceError
 from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.triangles import boundary_vertices, face_normals
-from ..model.rig import euler_xyz, euler_xyz_derivatives
+from ..model.rig import JAW_LOWER, JAW_UPPER, euler_xyz, euler_xyz_derivatives
 from .dogleg import dogleg
 from .results import write_fit_files
 
@@ -82,10 +82,6 @@ def posed_jacobian(surface_model, z, P):
     Jth = np.einsum("kij,vj->kvi", euler_xyz_derivatives(th), x)        # (3, V, 3)
     Jt = np.broadcast_to(np.eye(3)[:, None, :], (3, len(x), 3))
     return xr, np.concatenate([Jx, Jth, Jt])
-
-
-JAW_LOWER = np.array([-0.1, -0.15, -0.15, -0.008, -0.008, -0.008])   # rad, rad, rad, m, m, m
-JAW_UPPER = np.array([0.6, 0.15, 0.15, 0.008, 0.008, 0.008])
 
 
 def control_bounds(model):

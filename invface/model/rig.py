@@ -88,6 +88,10 @@ def pre_skinning(neutral, deltas, b):
 
 
 JAW_NAMES = ["jaw_rx", "jaw_ry", "jaw_rz", "jaw_tx", "jaw_ty", "jaw_tz"]
+# the jaw's anatomical range (fits and the builder's jaw split keep to it): opening -0.1..0.6
+# rad about the hinge, +-0.15 rad sideways and twist, +-8 mm translation in the jaw frame
+JAW_LOWER = np.array([-0.1, -0.15, -0.15, -0.008, -0.008, -0.008])   # rad, rad, rad, m, m, m
+JAW_UPPER = np.array([0.6, 0.15, 0.15, 0.008, 0.008, 0.008])
 
 
 def split_parameters(p, names, n_blendshapes):

@@ -6,23 +6,28 @@ imported ARKit ``jawOpen`` (or FACS AU26/27, ``jawLeft``...) has the jaw's rotat
 into its offsets; kept as it is, the rig would open the mouth linearly, and the muscle
 simulation (whose jaw bone follows j, not b) would be asked to open the skin around a
 closed jaw. So, for each jaw shape, the jaw parameters j_k (6,) are fitted so that the
-model's own skinning explains as much of the shape as it can (Gauss-Newton on
-sum_v |T(j)(n_v) - (n_v + D_v)|^2 over the vertices that carry the scan's data), and the
+model's own skinning explains as much of the shape as it can (bounded least squares on
+sum_v |T(j)(n_v) - (n_v + D_v)|^2 over the vertices that carry the scan's data, j within
+the jaw's range that the fits keep to: a split jaw outside it is one that no fit of the
+imported shape could reach), and the
 shape is replaced by its unskinned remainder d_k: T(j_k)(n + d_k) equals the imported shape
 exactly, and j_k is stored as the shape's paired jaw (meta['blendshape_jaw']), as the
 template's own jawOpen has.
 
 Measured on ICT-FaceKit's jawOpen (bench/jaw_split.py; small template morphed onto its
-neutral): j = 19 degrees about the hinge, and the driven simulation at (jawOpen = 1, j_k)
-follows the imported shape to 3.1 mm mean (offsets up to 42 mm); unsplit (j = 0) Newton
-does not converge. A rigid fit of the chin skin alone gave a jaw with 18 mm of translation
+neutral): j = 16.9 degrees about the hinge with 8 mm forward and 4.5 mm up (unbounded: 19.3
+degrees, 11 mm forward, 6.6 mm up), and the driven simulation at (jawOpen = 1, j_k) follows
+the imported shape to 2.98 mm mean (offsets up to 42 mm); unsplit (j = 0) Newton does not
+converge. A rigid fit of the chin skin alone gave a jaw with 18 mm of translation
 that the simulation followed less closely.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..model.rig import jaw_transform_derivatives, skin, skin_derivatives
+from scipy.optimize import least_squares
+
+from ..model.rig import JAW_LOWER, JAW_UPPER, jaw_transform_derivatives, skin, skin_derivatives
 from ..template.expressions import unskin
 
 JAW_FACS = ("AU26", "AU27", "AU29", "AU30")   # jaw drop, mouth stretch, jaw thrust, sideways
@@ -34,21 +39,22 @@ def is_jaw_shape(name):
     return name.lower().startswith("jaw") or name.upper().split("_")[0] in JAW_FACS
 
 
-def fit_jaw(model, shape, use, iterations=20):
+def fit_jaw(model, shape, use):
     """Jaw parameters (6,) whose skinning T(j)(n) best matches ``shape`` (V,3) m on the
-    vertices ``use`` (V,) bool (least squares, Gauss-Newton from j = 0)."""
+    vertices ``use`` (V,) bool: least squares from j = 0 within the jaw's range
+    (``model.rig.JAW_LOWER``/``JAW_UPPER``, the bounds the fits keep to)."""
     n, w = model.neutral[use], model.jaw_weights[use]
-    j = np.zeros(6)
-    for _ in range(iterations):
-        M = model.jaw_matrix(j)
-        r = (skin(n, w, M) - shape[use]).ravel()
+    none = np.zeros((0,) + n.shape)
+
+    def residual(j):
+        return (skin(n, w, model.jaw_matrix(j)) - shape[use]).ravel()
+
+    def jacobian(j):
         dM = jaw_transform_derivatives(j, model.jaw_pivot, model.jaw_frame)
-        J = skin_derivatives(n, w, M, np.zeros((0,) + n.shape), dM).reshape(6, -1).T
-        step = np.linalg.lstsq(J, -r, rcond=None)[0]
-        j += step
-        if np.abs(step).max() < 1e-9:
-            break
-    return j
+        return skin_derivatives(n, w, model.jaw_matrix(j), none, dM).reshape(6, -1).T
+
+    return least_squares(residual, np.zeros(6), jac=jacobian, bounds=(JAW_LOWER, JAW_UPPER),
+                         xtol=1e-12, ftol=1e-12, gtol=1e-12).x
 
 
 def split_jaw(model, names, deltas, known=None):
