@@ -93,6 +93,18 @@ def test_tangent_adjoint_and_finite_differences_agree(driven):
     assert np.linalg.norm(dX[names.index("jaw_rx")]) > 0
 
 
+def test_a_state_that_is_not_a_stable_equilibrium_has_no_derivatives(driven):
+    """The tangent needs the exact Newton matrix at the solution to be positive definite; at
+    a saddle (here: the matrix negated) the sensitivity raises SimulationError, which a fit's
+    dogleg treats as a rejected trial point, not a crash (an ICT jawOpen fit met one in CI)."""
+    import dataclasses
+    from invface.sim.quasistatic import SimulationError
+    _, r = _state(driven)
+    saddle = dataclasses.replace(r.sim, newton_data=-r.sim.newton_data, _solver=None)
+    with pytest.raises(SimulationError, match="not a stable equilibrium"):
+        Sensitivity(driven, dataclasses.replace(r, sim=saddle)).tangent()
+
+
 def test_surface_models_share_one_interface_and_the_bridge_matches_the_adjoint(small_expressive_model):
     m = small_expressive_model
     rng = np.random.default_rng(2)

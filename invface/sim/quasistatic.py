@@ -66,10 +66,15 @@ class SimResult:
     @property
     def solver(self):
         """The factorised exact Newton matrix at X (for tangent/adjoint solves), made on first
-        use and kept; raises NotSPD if the matrix at the solution is not positive definite."""
+        use and kept. Raises SimulationError if the matrix at the solution is not positive
+        definite: not a stable equilibrium, so no derivatives there (a fit rejects the point)."""
         if self._solver is None:
             s = self._make_solver()
-            s.factor(self.newton_data)
+            try:
+                s.factor(self.newton_data)
+            except linsolve.NotSPD as e:
+                raise SimulationError(f"no derivatives at this state: {e} there, so it is not a "
+                                      f"stable equilibrium ({self.report()})") from e
             self._solver = s
         return self._solver
 
