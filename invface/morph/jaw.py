@@ -15,16 +15,15 @@ exactly, and j_k is stored as the shape's paired jaw (meta['blendshape_jaw']), a
 template's own jawOpen has.
 
 Measured on ICT-FaceKit's jawOpen (bench/jaw_split.py; small template morphed onto its
-neutral): j = 16.9 degrees about the hinge with 8 mm forward and 4.5 mm up (unbounded: 19.3
-degrees, 11 mm forward, 6.6 mm up), and the driven simulation at (jawOpen = 1, j_k) follows
-the imported shape to 2.98 mm mean (offsets up to 42 mm); unsplit (j = 0) Newton does not
+neutral): j = 17.5 degrees about the hinge with 8 mm forward and 5.1 mm up (unbounded: 19.2
+degrees, 11 mm forward, 6.7 mm up), and the driven simulation at (jawOpen = 1, j_k) follows
+the imported shape to 2.99 mm mean (offsets up to 42 mm); unsplit (j = 0) Newton does not
 converge. A rigid fit of the chin skin alone gave a jaw with 18 mm of translation
 that the simulation followed less closely.
 """
 from __future__ import annotations
 
 import numpy as np
-
 from scipy.optimize import least_squares
 
 from ..model.rig import JAW_LOWER, JAW_UPPER, jaw_transform_derivatives, skin, skin_derivatives
