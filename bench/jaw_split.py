@@ -10,8 +10,9 @@ after the split, and the distance of the driven simulation at (shape = 1, its ja
 imported shape (mean / median / 95th percentile over the vertices the shape moves by > 1 mm).
 Each line also gives the deepest penetration of the solved state's contacts (flesh on flesh,
 on the cranium, on the jaw); ``--no-contact`` adds the simulation without collision penalties.
-The template's own jawOpen is given for comparison. With ``--unsplit`` each jaw shape is also simulated as imported (the whole offset as the
-blendshape, jaw closed; the muscle tracks recomputed), as the builder did before the split.
+The template's own jawOpen is given for comparison. With ``--unsplit`` each jaw shape is
+also simulated as imported (the whole offset as the blendshape, jaw closed; the muscle
+tracks recomputed), as the builder did before the split.
 """
 from __future__ import annotations
 

@@ -43,14 +43,14 @@ def fit_jaw(model, shape, use):
     vertices ``use`` (V,) bool: least squares from j = 0 within the jaw's range
     (``model.rig.JAW_LOWER``/``JAW_UPPER``, the bounds the fits keep to)."""
     n, w = model.neutral[use], model.jaw_weights[use]
-    none = np.zeros((0,) + n.shape)
+    no_shapes = np.zeros((0,) + n.shape)       # skin_derivatives' blendshape part, unused
 
     def residual(j):
         return (skin(n, w, model.jaw_matrix(j)) - shape[use]).ravel()
 
     def jacobian(j):
         dM = jaw_transform_derivatives(j, model.jaw_pivot, model.jaw_frame)
-        return skin_derivatives(n, w, model.jaw_matrix(j), none, dM).reshape(6, -1).T
+        return skin_derivatives(n, w, model.jaw_matrix(j), no_shapes, dM).reshape(6, -1).T
 
     return least_squares(residual, np.zeros(6), jac=jacobian, bounds=(JAW_LOWER, JAW_UPPER),
                          xtol=1e-12, ftol=1e-12, gtol=1e-12).x
