@@ -2,6 +2,7 @@ import numpy as np
 
 from meshes import box_tets
 
+from invface.mesh.embedding import barycentric_matrix, moving_least_squares
 from invface.mesh.tets import (boundary_faces, dihedral_angles, harmonic, laplacian, locate, locate_near,
                                radius_ratio, signed_volumes)
 from invface.mesh.triangles import covered_from_front
@@ -54,6 +55,48 @@ def test_locate_near_keeps_a_point_on_its_side_of_a_slit():
     assert t_near[0] >= len(t)                                   # the upper slab
     assert np.allclose(np.einsum("pk,pkj->pj", w, Xs[tets[t_near]]), p)
     assert w.min() > -0.2                                        # the best tet near the start
+
+
+def _sheet_in_box():
+    """A 4 cm box of 4x4x4 cells and a fine 61x61 sheet of points 1 cm deep in it."""
+    X, T = box_tets((4, 4, 4), (0.04, 0.04, 0.04))
+    g = np.linspace(0.003, 0.037, 61)
+    P = np.stack([*np.meshgrid(g, g, indexing="ij"), np.full((61, 61), 0.013)], -1).reshape(-1, 3)
+    t, w = locate(X, T, P)
+    return X, T, P, t, w
+
+
+def test_moving_least_squares_reproduces_affine_maps_and_is_smooth_across_tet_faces():
+    """The smooth embedding moves the sheet exactly with any affine map of the nodes; under a
+    bend (dz = 40 x^2) its second differences along the sheet stay near the bend's own
+    (2 * 40 * dx^2), where the barycentric sheet is flat inside each tet and creased at its faces."""
+    X, T, P, t, w = _sheet_in_box()
+    W = moving_least_squares(X, T, P, t, w)
+    assert np.allclose(np.asarray(W.sum(1)).ravel(), 1.0, atol=1e-12)
+    G, c = np.array([[1.1, 0.2, -0.1], [0.05, 0.9, 0.3], [-0.2, 0.1, 1.2]]), np.array([0.01, -0.02, 0.005])
+    assert np.abs(W @ (X @ G.T + c) - (P @ G.T + c)).max() < 1e-12
+    bent = X + np.c_[np.zeros((len(X), 2)), 40.0 * X[:, 0] ** 2]
+    dx = P[61, 0] - P[0, 0]
+    exact = 2 * 40.0 * dx ** 2
+    crease = {}
+    for name, E in (("mls", W), ("barycentric", barycentric_matrix(T, t, w, len(X)))):
+        z = (E @ bent)[:, 2].reshape(61, 61)
+        crease[name] = np.abs(np.diff(z, 2, axis=0) - exact).max() / exact
+    assert crease["barycentric"] > 10 and crease["mls"] < 0.2 * crease["barycentric"], crease
+
+
+def test_moving_least_squares_keeps_a_point_on_its_side_of_a_slit():
+    """Two slabs 1 mm apart, well within the kernel's reach: the points of the upper slab blend
+    only its own nodes, so they follow it exactly when it moves and the lower slab does not."""
+    X, t = box_tets((3, 3, 2), (0.03, 0.03, 0.01))
+    Xs, tets = np.concatenate([X, X + [0, 0, 0.011]]), np.concatenate([t, t + len(X)])
+    p = np.array([[0.016, 0.014, 0.0112], [0.005, 0.02, 0.0115]])
+    start = len(t) + np.argmin(np.linalg.norm(Xs[tets[len(t):]].mean(1)[None] - p[:, None], axis=2), axis=1)
+    tid, w = locate_near(Xs, tets, p, start)
+    W = moving_least_squares(Xs, tets, p, tid, w, radius=3.0)
+    assert W[:, :len(X)].nnz == 0
+    moved = Xs + np.where(np.arange(len(Xs)) >= len(X), 0.005, 0.0)[:, None] * [0, 0, 1]
+    assert np.allclose(W @ moved, p + [0, 0, 0.005], atol=1e-12)
 
 
 def test_covered_from_front_on_a_sphere():

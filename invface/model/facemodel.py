@@ -66,6 +66,8 @@ class FaceModel:
     blendshape_activations: np.ndarray = None   # (K, M) activations that made each shape
     track_displacements: np.ndarray = None      # (K,N,3) Poisson dX_k (paper 000 Eq. 11)
     scan_transform: np.ndarray = None           # (4,4) input scan frame -> model frame (morphed models)
+    skin_embedding: object = None               # sparse (V,N) surface = W @ X (morphed models: smooth
+                                                # moving-least-squares weights); None: barycentric
     meta: dict = field(default_factory=dict)
     _surface_models: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -122,8 +124,18 @@ class FaceModel:
                 self._surface_models[kind] = DrivenSimulation(self)
         return self._surface_models[kind]
 
+    def embedding_matrix(self):
+        """Sparse W (V, N), surface = W @ tet positions: ``skin_embedding`` where the model has
+        one (morphed models), else the barycentric embed_tets/embed_weights."""
+        if self.skin_embedding is not None:
+            return self.skin_embedding
+        from ..mesh.embedding import barycentric_matrix
+        return barycentric_matrix(self.tets, self.embed_tets, self.embed_weights, len(self.rest_positions))
+
     def embedded_surface(self, X) -> np.ndarray:
         """Surface positions (V,3) from tet-mesh positions X (N,3) through the embedding."""
+        if self.skin_embedding is not None:
+            return self.skin_embedding @ X
         return np.einsum("vk,vkd->vd", self.embed_weights, X[self.tets[self.embed_tets]])
 
     def skinned_volume(self, jaw) -> np.ndarray:

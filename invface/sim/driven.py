@@ -16,12 +16,12 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..model.rig import JAW_NAMES, split_parameters
 from .poisson import track_displacements
 from .quasistatic import SimResult, Simulator
 from .tracks import MuscleTracks, TrackState
+
 
 @dataclass
 class DrivenResult:
@@ -34,14 +34,6 @@ class DrivenResult:
     @property
     def X(self):
         return self.sim.X
-
-
-def embedding_matrix(model):
-    """Sparse W (V, N) with surface = W @ tet positions (the barycentric embedding)."""
-    V = len(model.embed_tets)
-    rows = np.repeat(np.arange(V), 4)
-    cols = model.tets[model.embed_tets].ravel()
-    return sp.csr_matrix((model.embed_weights.ravel(), (rows, cols)), shape=(V, len(model.rest_positions)))
 
 
 class DrivenSimulation:
@@ -65,7 +57,7 @@ class DrivenSimulation:
         self.tracks = MuscleTracks(model, dX, self.sim.dof_of_vertex >= 0, k)
         self.parameter_names = list(model.blendshape_names) + JAW_NAMES
         self.n_blendshapes = K
-        self.W = embedding_matrix(model)
+        self.W = model.embedding_matrix()
         self.last = None
         self.start = "last"        # where new solves start: see result_at
 

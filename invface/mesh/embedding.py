@@ -1,0 +1,84 @@
+"""Embeddings of a surface in a tet mesh: sparse maps W (V, N) with surface = W @ X.
+
+The barycentric embedding puts each surface vertex in one tet: the surface is piecewise
+linear in space, and where the tets are much larger than the surface's triangles (a morphed
+actor's lips: 8 mm tets under 1 mm triangles) every tet face the surface crosses shows as a
+crease, and a vertex near a tet corner follows that corner alone: a strongly deformed pose
+(jawOpen) tears the lip line into spikes.
+
+The moving-least-squares embedding (linear basis, compact quartic kernel) blends the nodes
+near each vertex instead. Its weights sum to 1 and reproduce every affine map of the nodes
+exactly, so the rest surface and any rigid or affine motion come out as with barycentric
+weights, and the deformed surface is smooth across tet faces. Each vertex blends only nodes of
+the tets within ``rings`` vertex-rings of its own tet, so the two sides of a slit (lips,
+eyelids) stay apart although they are close in space.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+_EDGES = ([0, 0, 0, 1, 1, 2], [1, 2, 3, 2, 3, 3])
+_MAX_COND = 1e6        # a point whose moment matrix is worse than this, or whose weights' absolute
+_MAX_LEBESGUE = 5.0    # sum exceeds this (a few nodes far to one side), keeps its barycentric row
+
+
+def barycentric_matrix(tets, tet_ids, weights, n_nodes):
+    """Sparse W (V, N) of a barycentric embedding: vertex v = sum_k weights[v,k] X[tets[tet_ids[v],k]].
+
+    tets (T,4) ints, tet_ids (V,) ints, weights (V,4), n_nodes N."""
+    V = len(tet_ids)
+    return sp.csr_matrix((np.asarray(weights, float).ravel(), (np.repeat(np.arange(V), 4), tets[tet_ids].ravel())),
+                         shape=(V, n_nodes))
+
+
+def node_spacing(X, tets):
+    """Mean length (N,) m of the tet edges at each node (X (N,3), tets (T,4))."""
+    e = np.stack([tets[:, _EDGES[0]], tets[:, _EDGES[1]]], -1).reshape(-1, 2)
+    length = np.linalg.norm(X[e[:, 0]] - X[e[:, 1]], axis=1)
+    count = np.bincount(e.ravel(), minlength=len(X))
+    return np.bincount(e.ravel(), np.repeat(length, 2), minlength=len(X)) / np.maximum(count, 1)
+
+
+def moving_least_squares(X, tets, points, tet_ids, weights, rings=2, radius=1.5):
+    """Smooth embedding W (P, N) of ``points`` (P,3) m in the tet mesh (X (N,3) m, tets (T,4)).
+
+    tet_ids (P,), weights (P,4): each point's barycentric embedding (its own tet, from
+    ``tets.locate_near``). A point's nodes are those of the tets within ``rings`` vertex-rings
+    of its tet; node i reaches h_i = ``radius`` times the mean length of its edges. Per point p
+    the weights are phi_i = k_i q_i^T A^-1 e_1 with the linear basis q_i = (1, X_i - p) (scaled),
+    A = sum_i k_i q_i q_i^T and the C1 kernel k_i = (1 - |X_i - p|^2 / h_i^2)^2: rows sum to 1
+    and W @ (X G^T + c) = points G^T + c for any affine map. The weights are smooth in p
+    wherever every node that reaches p is among its candidates (2 rings at radius 1.5: a bent
+    sheet's creases at tet faces are 15x smaller than barycentric ones). A point whose nodes do not span 3D well (moment matrix condition > 1e6, or
+    sum_i |phi_i| > 5: a few nodes, all to one side) keeps its barycentric row. Returns CSR (P, N).
+    """
+    points = np.asarray(points, float).reshape(-1, 3)
+    T, N, P = len(tets), len(X), len(points)
+    M = sp.csr_matrix((np.ones(tets.size), (np.repeat(np.arange(T), 4), tets.ravel())), shape=(T, N))
+    C = sp.csr_matrix((np.ones(P), (np.arange(P), tet_ids)), shape=(P, T))
+    for _ in range(rings):
+        C = ((C @ M) @ M.T).tocsr()
+    nodes = (C @ M).tocsr()
+    nodes.sum_duplicates()
+    pid = np.repeat(np.arange(P), np.diff(nodes.indptr))
+    node = nodes.indices
+    h = radius * node_spacing(X, tets)                 # (N,): each node's kernel radius, smooth in space
+    s = h[tets[tet_ids]].mean(1)                       # (P,): the basis' scale (conditioning only)
+    d = X[node] - points[pid]
+    q = np.c_[np.ones(len(node)), d / s[pid, None]]    # centred linear basis
+    k = np.clip(1.0 - (d ** 2).sum(1) / h[node] ** 2, 0.0, None) ** 2
+    A = np.empty((P, 4, 4))
+    for a in range(4):
+        for b in range(a, 4):
+            A[:, a, b] = A[:, b, a] = np.bincount(pid, k * q[:, a] * q[:, b], minlength=P)
+    ok = np.linalg.cond(A) < _MAX_COND
+    A[~ok] = np.eye(4)
+    c = np.linalg.solve(A, np.broadcast_to(np.eye(4)[:, :1], (P, 4, 1)))[..., 0]         # A^-1 e_1
+    phi = k * np.einsum("ik,ik->i", q, c[pid])
+    ok &= np.bincount(pid, np.abs(phi), minlength=P) <= _MAX_LEBESGUE
+    keep = ok[pid] & (phi != 0)
+    W = sp.csr_matrix((phi[keep], (pid[keep], node[keep])), shape=(P, N))
+    if not ok.all():
+        W = W + sp.diags((~ok).astype(float)) @ barycentric_matrix(tets, tet_ids, weights, N)
+    return W.tocsr()
