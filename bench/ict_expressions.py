@@ -73,8 +73,9 @@ def main():
     # the model's boundary, the ears (boxed out) or the back of the head
     covered = closest_points(V0 @ A[:3, :3].T + A[:3, 3], model.neutral, model.triangles)[2] < COVERED
     rows = []
-    print(f"{'expression':18s} {'before':>13s} {'blendshape':>13s} {'s':>6s} {'simulation':>13s} {'s':>6s}"
-          "   (median / 95% mm over the moving scan vertices)")
+    print(f"{'expression':18s} {'before':>13s} {'blendshape':>13s} {'hinge':>5s} {'s':>6s} "
+          f"{'simulation':>13s} {'hinge':>5s} {'s':>6s}   (median / 95% mm over the moving scan vertices; "
+          "the fitted jaw hinge in degrees)")
     for name in wanted:
         if name not in names:
             sys.exit(f"unknown ICT expression '{name}'")
@@ -98,10 +99,9 @@ def main():
             write_scan_fit(out / name / kind, model, fit, scan=f"ICT-FaceKit {name}", mode="nearest", lam=1e-6,
                            seconds=secs, notes=[f"error before the fit (neutral model): median {before[0]:.2f} mm, "
                                                 f"95% {before[1]:.2f} mm"])
-        b, s = row["blendshape"], row.get("simulation")
-        print(f"{name:18s} {before[0]:5.2f} / {before[1]:5.2f} {b['after_mm'][0]:5.2f} / {b['after_mm'][1]:5.2f} "
-              f"{b['seconds']:6.1f} " + (f"{s['after_mm'][0]:5.2f} / {s['after_mm'][1]:5.2f} {s['seconds']:6.1f}" if s else ""),
-              flush=True)
+        cols = [f"{r['after_mm'][0]:5.2f} / {r['after_mm'][1]:5.2f} {np.degrees(r['jaw_rad']):5.1f} {r['seconds']:6.1f}"
+                for r in (row["blendshape"], row.get("simulation")) if r]
+        print(f"{name:18s} {before[0]:5.2f} / {before[1]:5.2f} " + " ".join(cols), flush=True)
         rows.append(row)
         from invface.report.fit import write_report
         write_report(out / name, title=f"invface: ICT-FaceKit {name} as a scan target")

@@ -9,7 +9,10 @@ an actor with ``build-model --blendshapes`` semantics, and prints per shape: the
 after the split, and the distance of the driven simulation at (shape = 1, its jaw) to the
 imported shape (mean / median / 95th percentile over the vertices the shape moves by > 1 mm).
 Each line also gives the deepest penetration of the solved state's contacts (flesh on flesh,
-on the cranium, on the jaw); ``--no-contact`` adds the simulation without collision penalties.
+on the cranium, on the jaw), and the creases of the simulated skin: how far each vertex lies
+off its neighbours' mean beyond the imported shape's own (99.9th percentile / max, mm), with
+the model's smooth skin embedding and with the barycentric one it replaced.
+``--no-contact`` adds the simulation without collision penalties.
 The template's own jawOpen is given for comparison. With ``--unsplit`` each jaw shape is
 also simulated as imported (the whole offset as the blendshape, jaw closed; the muscle
 tracks recomputed), as the builder did before the split.
@@ -25,7 +28,9 @@ import numpy as np
 import trimesh
 
 import invface
+from invface.mesh.embedding import barycentric_matrix
 from invface.mesh.meshfile import read_mesh
+from invface.mesh.triangles import umbrella
 from invface.morph.build import build_model
 from invface.sim.driven import DrivenSimulation
 
@@ -69,7 +74,7 @@ def main():
         head = (f"jaw {np.degrees(j[:3]).round(1).tolist()} deg, {(j[3:] * 1000).round(1).tolist()} mm; mean "
                 f"offset {s['mean_before_mm']:.2f} -> {s['mean_after_mm']:.2f} mm" if s else "not a jaw shape")
         print(f"{n}: {head}; simulation vs imported {e.mean():.2f} / {np.median(e):.2f} / "
-              f"{np.quantile(e, 0.95):.2f} mm ({sec:.1f} s); {deepest(r)}")
+              f"{np.quantile(e, 0.95):.2f} mm ({sec:.1f} s); {deepest(r)}; {creases(model, r.X, target)}")
         if a.no_contact:
             e = np.linalg.norm(free.surface(p) - target, axis=1)[moved] * 1000
             print(f"    without contacts: {e.mean():.2f} / {np.median(e):.2f} / {np.quantile(e, 0.95):.2f} mm")
@@ -94,6 +99,17 @@ def deepest(result):
     jaw = c.moves & ~flesh
     kinds = {"flesh": flesh, "cranium": ~flesh & ~jaw, "jaw": jaw}
     return "deepest contact " + ", ".join(f"{k} {max(g[m].max(initial=0), 0):.1f}" for k, m in kinds.items()) + " mm"
+
+
+def creases(model, X, target):
+    """The simulated skin's creases: the umbrella Laplacian |mean of neighbours - x| (mm) of
+    the embedded surface beyond that of ``target``, 99.9th percentile / max, for the model's
+    embedding and for the barycentric one (embed_tets/embed_weights)."""
+    out = []
+    for W in (model.embedding_matrix(), barycentric_matrix(model.tets, model.embed_tets, model.embed_weights, len(X))):
+        c = (umbrella(W @ X, model.triangles) - umbrella(target, model.triangles)) * 1000
+        out.append(f"{np.quantile(c, 0.999):.2f} / {c.max():.2f}")
+    return f"creases {out[0]} mm (barycentric {out[1]} mm)"
 
 
 def unsplit(model, name, target):

@@ -109,7 +109,7 @@ def test_real_scan_ict_neutral(small_model, tmp_path):
     from conftest import ICT
     from invface.mesh.meshfile import read_mesh
     from invface.mesh.tets import radius_ratio, signed_volumes
-    from invface.mesh.triangles import boundary_loops
+    from invface.mesh.triangles import boundary_loops, umbrella
     if not (ICT / "neutral.obj").exists():
         pytest.skip("ICT-FaceKit data (../shared/data/ict-facekit) is not available")
     V, F = read_mesh(ICT / "neutral.obj")
@@ -125,6 +125,11 @@ def test_real_scan_ict_neutral(small_model, tmp_path):
     err = np.linalg.norm(model.surface_model("simulation").surface(p) - target, axis=1)
     moved = np.linalg.norm(target - model.neutral, axis=1) > 0.001
     assert err[moved].mean() < 0.004, err[moved].mean()                         # 3.1 mm, offsets to 42
+    # the skin is embedded smoothly: the simulated lip line does not tear into spikes where the
+    # dense skin crosses the coarse lip tets' faces (barycentric: creases up to 12.7 mm)
+    X = model.surface_model("simulation").result_at(p).X
+    crease = umbrella(model.embedded_surface(X), model.triangles) - umbrella(target, model.triangles)
+    assert crease.max() < 0.005, crease.max()                                   # 2.4 mm
     assert (signed_volumes(model.rest_positions, model.tets) > 0).all()
     assert radius_ratio(model.rest_positions, model.tets).min() >= 0.005
     assert res.stats["centerlines_inside"] > 0.9
@@ -166,6 +171,7 @@ def test_real_scan_ict_neutral(small_model, tmp_path):
     # with the jaw as much as the vertex's own skinning weight says
     vj = np.einsum("vk,vk->v", model.embed_weights, model.volume_jaw_weights[model.tets[model.embed_tets]])
     assert np.abs(vj - model.jaw_weights).max() < 0.5
+    assert np.abs(model.skin_embedding @ model.volume_jaw_weights - model.jaw_weights).max() < 0.5
     assert np.abs(model.neutral[:, 0]).max() < 0.085
     assert res.stats["inverted_triangles"] < 40
 

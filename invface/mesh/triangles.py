@@ -39,6 +39,17 @@ def unique_edges(F):
     return edges, inv.reshape(3, len(F)).T
 
 
+def umbrella(X, faces):
+    """Distance (V,) from each vertex of X (V,3) to the mean of its edge neighbours in
+    triangles ``faces`` (F,3), units of X: a crease or spike shows as a large value."""
+    X = np.asarray(X, float)
+    E, _ = unique_edges(faces)
+    n = len(X)
+    A = coo_matrix((np.ones(2 * len(E)), (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), shape=(n, n)).tocsr()
+    deg = np.maximum(np.asarray(A.sum(1)).ravel(), 1)[:, None]
+    return np.linalg.norm(A @ X / deg - X, axis=1)
+
+
 def edge_components(edges, n):
     """Connected-component label (n,) of each of n nodes joined by the edges (E,2)."""
     e = np.asarray(edges, np.int64).reshape(-1, 2)

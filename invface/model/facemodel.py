@@ -150,4 +150,7 @@ class FaceModel:
                 "blendshapes": len(self.blendshape_names), "muscles": len(self.muscles),
                 "muscle_tets": int(sum(len(m.tets) for m in self.muscles)),
                 "fixed_cranium": int(len(self.fixed_cranium)), "fixed_jaw": int(len(self.fixed_jaw)),
-                "landmarks": len(self.landmarks), "curves": len(self.curves), **q}
+                "landmarks": len(self.landmarks), "curves": len(self.curves),
+                "skin_embedding": "barycentric" if self.skin_embedding is None else
+                f"moving least squares ({self.skin_embedding.nnz / len(self.neutral):.1f} tet vertices per skin vertex)",
+                **q}
