@@ -17,7 +17,7 @@ def _progress(msg):
 def _print_summary(model, seconds):
     s = model.summary()
     print(f"surface: {s['surface_vertices']} vertices, {s['surface_triangles']} triangles; "
-          f"blendshapes: {s['blendshapes']}; embedded {s['skin_embedding']}")
+          f"blendshapes: {s['blendshapes']}; skin embedding: {s['skin_embedding']}")
     print(f"flesh:   {s['vertices']} vertices, {s['tets']} tets, volume {s['volume_m3'] * 1e6:.0f} cm^3; "
           f"fixed: {s['fixed_cranium']} cranium, {s['fixed_jaw']} jaw")
     print(f"quality: min dihedral {s['min_dihedral_deg']:.2f} deg, max dihedral {s['max_dihedral_deg']:.1f} deg, "

@@ -29,25 +29,25 @@ def test_round_trip_is_exact(small_model, tmp_path):
 
 
 def test_a_smooth_skin_embedding_round_trips_and_is_validated(small_model, tmp_path):
-    """A morphed model's sparse skin embedding is saved as CSR arrays, read back exactly and
-    used for the surface; a row that does not sum to 1 is named on load."""
+    """A morphed model's smooth skin embedding is stored as its parameters (meta) and rebuilt
+    on load, the same matrix; an unknown method is named on load."""
     from dataclasses import replace
 
-    from invface.mesh.embedding import moving_least_squares
-    m = replace(small_model, _surface_models={})
-    m.skin_embedding = moving_least_squares(m.rest_positions, m.tets, m.neutral, m.embed_tets, m.embed_weights)
+    from invface.mesh.embedding import MLS
+    m = replace(small_model, _surface_models={}, _embedding=None,
+                meta={**small_model.meta, "skin_embedding": dict(MLS, rings=1)})
     p = tmp_path / "smooth.npz"
     m.save(p)
     back = invface.FaceModel.load(p)
-    assert (back.skin_embedding != m.skin_embedding).nnz == 0
+    assert (back.embedding_matrix() != m.embedding_matrix()).nnz == 0
     X = m.rest_positions + 0.001 * np.sin(40 * m.rest_positions[:, [1, 2, 0]])
-    assert np.array_equal(back.embedded_surface(X), m.skin_embedding @ X)
     assert np.abs(back.embedded_surface(X) - small_model.embedded_surface(X)).max() > 1e-6   # not the barycentric one
-    w = np.load(p)["skin_embedding_weights"].copy()
-    w[0] *= 3.0
+    assert np.abs(back.embedded_surface(m.rest_positions) - m.neutral).max() < 1e-12
+    header = json.loads(str(np.load(p)["header"]))
+    header["meta"]["skin_embedding"]["method"] = "radial_basis"
     bad = tmp_path / "bad.npz"
-    _rewrite(p, bad, skin_embedding_weights=w)
-    with pytest.raises(BundleError, match="bad.npz.*'skin_embedding_weights' rows must sum to 1"):
+    _rewrite(p, bad, header=np.array(json.dumps(header)))
+    with pytest.raises(BundleError, match="bad.npz.*'header'.*skin_embedding must be"):
         invface.FaceModel.load(bad)
 
 

@@ -13,9 +13,9 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
 
-from ..errors import BundleError
+from ..errors import BundleError, InvfaceError
+from ..mesh.embedding import skin_embedding_method
 from ..mesh.tets import signed_volumes
 
 FORMAT = "invface-facemodel"
@@ -74,10 +74,6 @@ def save_bundle(model, path):
         arrays["track_displacements"] = m.track_displacements
     if m.scan_transform is not None:
         arrays["scan_transform"] = np.asarray(m.scan_transform, np.float64)
-    if m.skin_embedding is not None:
-        W = m.skin_embedding.tocsr()
-        arrays.update(skin_embedding_indptr=W.indptr.astype(np.int64), skin_embedding_indices=W.indices.astype(np.int64),
-                      skin_embedding_weights=W.data.astype(np.float64))
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     try:
@@ -130,24 +126,6 @@ class _Reader:
         if a.size and (a.min() < 0 or a.max() >= upper):
             self.fail(field, f"has indices outside [0, {upper}) (min {a.min()}, max {a.max()})")
         return a
-
-
-def _skin_embedding(r, V, N):
-    """The optional sparse skin embedding (V, N) from its CSR arrays, validated; or None."""
-    indptr = r.get("skin_embedding_indptr", "i", (V + 1,), optional=True)
-    if indptr is None:
-        return None
-    if indptr[0] != 0 or np.any(np.diff(indptr) < 1):
-        r.fail("skin_embedding_indptr", "must start at 0 and give every surface vertex at least one weight")
-    nnz = int(indptr[-1])
-    indices = r.ids("skin_embedding_indices", N, (nnz,))
-    weights = r.get("skin_embedding_weights", "f", (nnz,))
-    W = sp.csr_matrix((weights, indices, indptr), shape=(V, N))
-    rows = np.asarray(W.sum(1)).ravel()
-    if np.abs(rows - 1).max() > 1e-6:
-        r.fail("skin_embedding_weights", f"rows must sum to 1 (vertex {int(np.argmax(np.abs(rows - 1)))} sums to "
-                                         f"{rows[np.argmax(np.abs(rows - 1))]:.6g})")
-    return W
 
 
 def load_bundle(path):
@@ -231,7 +209,11 @@ def load_bundle(path):
         acts = r.get("blendshape_activations", "f", (K, M), optional=True)
         track = r.get("track_displacements", "f", (K, N, 3), optional=True)
         scan_tf = r.get("scan_transform", "f", (4, 4), optional=True)
-        skin_embedding = _skin_embedding(r, V, N)
+        meta = dict(header.get("meta", {}))
+        try:
+            skin_embedding_method(meta)
+        except InvfaceError as e:
+            r.fail("header", str(e))
         return FaceModel(
             neutral=neutral, triangles=triangles, blendshape_names=[str(s) for s in header["blendshape_names"]],
             blendshapes=blendshapes, jaw_pivot=r.get("jaw_pivot", "f", (3,)), jaw_frame=r.get("jaw_frame", "f", (3, 3)),
@@ -243,6 +225,5 @@ def load_bundle(path):
             cranium_mesh=(cverts, r.ids("cranium_triangles", len(cverts), (None, 3))),
             jaw_mesh=(jverts, r.ids("jaw_triangles", len(jverts), (None, 3))),
             blendshape_activations=acts, track_displacements=track, scan_transform=scan_tf,
-            skin_embedding=skin_embedding,
-            meta=dict(header.get("meta", {})),
+            meta=meta,
         )

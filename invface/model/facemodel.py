@@ -66,10 +66,9 @@ class FaceModel:
     blendshape_activations: np.ndarray = None   # (K, M) activations that made each shape
     track_displacements: np.ndarray = None      # (K,N,3) Poisson dX_k (paper 000 Eq. 11)
     scan_transform: np.ndarray = None           # (4,4) input scan frame -> model frame (morphed models)
-    skin_embedding: object = None               # sparse (V,N) surface = W @ X (morphed models: smooth
-                                                # moving-least-squares weights); None: barycentric
     meta: dict = field(default_factory=dict)
     _surface_models: dict = field(default_factory=dict, repr=False, compare=False)
+    _embedding: object = field(default=None, repr=False, compare=False)
 
     # -- public API -------------------------------------------------------------------
     @classmethod
@@ -125,18 +124,20 @@ class FaceModel:
         return self._surface_models[kind]
 
     def embedding_matrix(self):
-        """Sparse W (V, N), surface = W @ tet positions: ``skin_embedding`` where the model has
-        one (morphed models), else the barycentric embed_tets/embed_weights."""
-        if self.skin_embedding is not None:
-            return self.skin_embedding
-        from ..mesh.embedding import barycentric_matrix
-        return barycentric_matrix(self.tets, self.embed_tets, self.embed_weights, len(self.rest_positions))
+        """Sparse W (V, N), surface = W @ tet positions (computed once per FaceModel).
+
+        meta["skin_embedding"] names the method: {"method": "moving_least_squares", ...} for
+        morphed models (mesh.embedding, made from the barycentric embedding and the rest mesh,
+        so the bundle stores only these parameters); absent: barycentric (embed_tets/weights)."""
+        if self._embedding is None:
+            from ..mesh.embedding import embedding_matrix
+            self._embedding = embedding_matrix(self.rest_positions, self.tets, self.neutral, self.embed_tets,
+                                               self.embed_weights, self.meta.get("skin_embedding"))
+        return self._embedding
 
     def embedded_surface(self, X) -> np.ndarray:
         """Surface positions (V,3) from tet-mesh positions X (N,3) through the embedding."""
-        if self.skin_embedding is not None:
-            return self.skin_embedding @ X
-        return np.einsum("vk,vkd->vd", self.embed_weights, X[self.tets[self.embed_tets]])
+        return self.embedding_matrix() @ X
 
     def skinned_volume(self, jaw) -> np.ndarray:
         """Rest tet positions moved rigidly by the jaw with volumetric jaw weights (N,3)."""
@@ -151,6 +152,5 @@ class FaceModel:
                 "muscle_tets": int(sum(len(m.tets) for m in self.muscles)),
                 "fixed_cranium": int(len(self.fixed_cranium)), "fixed_jaw": int(len(self.fixed_jaw)),
                 "landmarks": len(self.landmarks), "curves": len(self.curves),
-                "skin_embedding": "barycentric" if self.skin_embedding is None else
-                f"moving least squares ({self.skin_embedding.nnz / len(self.neutral):.1f} tet vertices per skin vertex)",
+                "skin_embedding": (self.meta.get("skin_embedding") or {}).get("method", "barycentric"),
                 **q}

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import ConfigError, MeshError
 from ..mesh.closest import barycentric_points, closest_points
-from ..mesh.embedding import moving_least_squares
+from ..mesh.embedding import MLS
 from ..mesh.meshfile import read_mesh
 from ..mesh.tets import locate_near, quality_summary
 from ..model.facemodel import FaceModel
@@ -158,8 +158,6 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     jaw = (carry_points(X0, X1, tets, template.jaw_mesh[0]), template.jaw_mesh[1])
     pivot = carry_points(X0, X1, tets, template.jaw_pivot)[0]
     et, ew = locate_near(X1, tets, surf.positions, template.embed_tets)   # each skin vertex stays on its side of the lips
-    W = moving_least_squares(X1, tets, surf.positions, et, ew)             # smooth across the tets' faces
-    say(f"skin embedded: moving least squares over {W.nnz / W.shape[0]:.1f} tet vertices per skin vertex")
     lap("volume")
 
     model = FaceModel(
@@ -169,8 +167,10 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
         fixed_cranium=template.fixed_cranium, fixed_jaw=template.fixed_jaw,
         embed_tets=et, embed_weights=ew, volume_jaw_weights=template.volume_jaw_weights,
         muscles=muscles, landmarks=dict(template.landmarks), curves=dict(template.curves),
-        cranium_mesh=cranium, jaw_mesh=jaw, skin_embedding=W,
+        cranium_mesh=cranium, jaw_mesh=jaw, meta={"skin_embedding": dict(MLS)},   # smooth across the tets' faces
     )
+    W = model.embedding_matrix()
+    say(f"skin embedded: moving least squares over {W.nnz / W.shape[0]:.1f} tet vertices per skin vertex")
     S = np.diag([target.scale] * 3 + [1.0])
     A = np.eye(4)
     A[:3, :3], A[:3, 3] = al.R, al.t
