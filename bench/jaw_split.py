@@ -28,7 +28,7 @@ import numpy as np
 import trimesh
 
 import invface
-from invface.mesh.embedding import barycentric_matrix
+from invface.mesh.embedding import barycentric_matrix, embedding_matrix
 from invface.mesh.meshfile import read_mesh
 from invface.mesh.triangles import umbrella
 from invface.morph.build import build_model
@@ -57,6 +57,11 @@ def main():
         t0 = time.perf_counter()
         model, res = build_model(ICT / "neutral.obj", blendshapes=tmp, template=tpl, expressions="none")
     print(f"built in {time.perf_counter() - t0:.1f} s")
+    t0 = time.perf_counter()
+    W = embedding_matrix(model.rest_positions, model.tets, model.neutral, model.embed_tets, model.embed_weights,
+                         model.meta["skin_embedding"])
+    print(f"skin embedding {model.meta['skin_embedding']}: {W.nnz / W.shape[0]:.1f} weights per skin vertex, "
+          f"{time.perf_counter() - t0:.2f} s to make (as on each load)")
     split, targets = res.stats["jaw_split"], {}
     sim = DrivenSimulation(model)
     free = DrivenSimulation(model, contact=False) if a.no_contact else None

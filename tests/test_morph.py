@@ -80,6 +80,27 @@ def test_smile_simulates_on_morphed_model(actors):
     assert np.isfinite(xs).all()
 
 
+def test_smooth_skin_embedding_and_its_derivatives(actors):
+    """A morphed model's skin is embedded by moving least squares: exact at rest, and the
+    simulation's surface derivatives go through the same weights (adjoint vs finite differences)."""
+    model = actors[0][0]
+    assert model.meta["skin_embedding"]["method"] == "moving_least_squares"
+    W = model.embedding_matrix()
+    assert W.nnz > 10 * W.shape[0]                               # not the 4 barycentric weights
+    assert np.abs(W @ model.rest_positions - model.neutral).max() < 1e-12
+    sim = model.surface_model("simulation")
+    p = model.parameters({"lipCornerPull_L": 0.6, "jawOpen": 0.3})
+    r = sim.solve(p, warm=None, rtol=1e-10)
+    gx = np.random.default_rng(2).standard_normal(model.neutral.shape)
+    g = sim.surface_vjp(p, gx)
+    i, h = model.blendshape_names.index("lipCornerPull_L"), 1e-4
+    e = np.zeros_like(p)
+    e[i] = h
+    x = [sim.surface_of(sim.solve(p + s * e, warm=r, contacts=r.sim.contacts, rtol=1e-10)) for s in (1, -1)]
+    fd = np.sum(gx * (x[0] - x[1])) / (2 * h)
+    assert abs(g[i] - fd) <= 1e-4 * abs(fd), (g[i], fd)
+
+
 def test_partial_scan_is_completed_from_the_template(small_expressive_model):
     """A front-of-face scan (paper 001 sec. 8.1): the outer landmarks land on its cut edge,
     so they keep the template's and their curves are left out; the face is morphed and the

@@ -17,7 +17,7 @@ template's own jawOpen has.
 Measured on ICT-FaceKit's jawOpen (bench/jaw_split.py; small template morphed onto its
 neutral): j = 17.5 degrees about the hinge with 8 mm forward and 5.1 mm up (unbounded: 19.2
 degrees, 11 mm forward, 6.7 mm up), and the driven simulation at (jawOpen = 1, j_k) follows
-the imported shape to 2.96 mm mean (offsets up to 42 mm); unsplit (j = 0) Newton does not
+the imported shape to 2.99 mm mean (offsets up to 42 mm); unsplit (j = 0) Newton does not
 converge. A rigid fit of the chin skin alone gave a jaw with 18 mm of translation
 that the simulation followed less closely.
 """
