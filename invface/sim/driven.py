@@ -19,8 +19,11 @@ import numpy as np
 
 from ..model.rig import JAW_NAMES, split_parameters
 from .poisson import track_displacements
-from .quasistatic import SimResult, Simulator
+from .quasistatic import SimResult, SimulationError, Simulator
 from .tracks import MuscleTracks, TrackState
+
+
+RECENT = 2                 # solves kept besides the last one (DrivenSimulation.result_at)
 
 
 @dataclass
@@ -59,6 +62,7 @@ class DrivenSimulation:
         self.n_blendshapes = K
         self.W = model.embedding_matrix()
         self.last = None
+        self.recent = []           # the solves before the last (at most RECENT), newest first
         self.start = "last"        # where new solves start: see result_at
 
     def split(self, p):
@@ -76,6 +80,8 @@ class DrivenSimulation:
         res = self.sim.solve(state.activations, jaw, tracks=self.tracks.springs(state),
                              warm=warm.sim if warm is not None else None, contacts=contacts, **kw)
         out = DrivenResult(np.asarray(p, float).copy(), state, res)
+        if self.last is not None:
+            self.recent = [self.last] + self.recent[:RECENT - 1]
         self.last = out
         return out
 
@@ -89,13 +95,22 @@ class DrivenSimulation:
         return self.surface_of(self.result_at(p))
 
     def result_at(self, p):
-        """The DrivenResult at p: the last one when p is unchanged, else a new solve, warm
-        from the last one (``start = "last"``) or cold, from rest (``"rest"``). From rest the
-        surface is a function of p alone; from the last solve, contact planes and lip
-        contacts depend on the path of earlier solves (up to 0.1 mm apart at the same p)."""
-        if self.last is not None and np.array_equal(self.last.p, np.asarray(p, float).reshape(-1)):
-            return self.last
-        return self.solve(p, warm=None if self.start == "rest" else "last")
+        """The DrivenResult at p: the last one or one of the RECENT before it when p is one
+        of theirs (a fit returns to its accepted point after a rejected trial), else a new
+        solve, warm from the last one (``start = "last"``) or cold, from rest (``"rest"``).
+        From rest the surface is a function of p alone; from the last solve, contact planes
+        and lip contacts depend on the path of earlier solves (up to 0.1 mm apart at the same
+        p). A warm solve that does not converge is tried again from rest."""
+        p = np.asarray(p, float).reshape(-1)
+        for r in [self.last] + self.recent:
+            if r is not None and np.array_equal(r.p, p):
+                return r
+        if self.start == "rest" or self.last is None:
+            return self.solve(p, warm=None)
+        try:
+            return self.solve(p, warm="last")
+        except SimulationError:
+            return self.solve(p, warm=None)
 
     @contextmanager
     def starting_from(self, start):
