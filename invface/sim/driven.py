@@ -19,11 +19,8 @@ import numpy as np
 
 from ..model.rig import JAW_NAMES, split_parameters
 from .poisson import track_displacements
-from .quasistatic import SimResult, SimulationError, Simulator
+from .quasistatic import SimResult, Simulator
 from .tracks import MuscleTracks, TrackState
-
-
-RECENT = 2                 # solves kept besides the last one (DrivenSimulation.result_at)
 
 
 @dataclass
@@ -62,7 +59,7 @@ class DrivenSimulation:
         self.n_blendshapes = K
         self.W = model.embedding_matrix()
         self.last = None
-        self.recent = []           # the solves before the last (at most RECENT), newest first
+        self.anchor = None         # the last solve whose derivatives were taken: a fit's accepted point
         self.start = "last"        # where new solves start: see result_at
 
     def split(self, p):
@@ -80,8 +77,6 @@ class DrivenSimulation:
         res = self.sim.solve(state.activations, jaw, tracks=self.tracks.springs(state),
                              warm=warm.sim if warm is not None else None, contacts=contacts, **kw)
         out = DrivenResult(np.asarray(p, float).copy(), state, res)
-        if self.last is not None:
-            self.recent = [self.last] + self.recent[:RECENT - 1]
         self.last = out
         return out
 
@@ -95,22 +90,17 @@ class DrivenSimulation:
         return self.surface_of(self.result_at(p))
 
     def result_at(self, p):
-        """The DrivenResult at p: the last one or one of the RECENT before it when p is one
-        of theirs (a fit returns to its accepted point after a rejected trial), else a new
-        solve, warm from the last one (``start = "last"``) or cold, from rest (``"rest"``).
-        From rest the surface is a function of p alone; from the last solve, contact planes
-        and lip contacts depend on the path of earlier solves (up to 0.1 mm apart at the same
-        p). A warm solve that does not converge is tried again from rest."""
+        """The DrivenResult at p: the last solve or the anchor (the last one whose derivatives
+        were taken: a fit coming back to its accepted point after rejected trials) when p is
+        theirs, else a new solve, warm from the last one (``start = "last"``) or cold, from
+        rest (``"rest"``). From rest the surface is a function of p alone; from the last
+        solve, contact planes and lip contacts depend on the path of earlier solves (up to
+        0.1 mm apart at the same p)."""
         p = np.asarray(p, float).reshape(-1)
-        for r in [self.last] + self.recent:
+        for r in (self.last, self.anchor):
             if r is not None and np.array_equal(r.p, p):
                 return r
-        if self.start == "rest" or self.last is None:
-            return self.solve(p, warm=None)
-        try:
-            return self.solve(p, warm="last")
-        except SimulationError:
-            return self.solve(p, warm=None)
+        return self.solve(p, warm=None if self.start == "rest" else "last")
 
     @contextmanager
     def starting_from(self, start):
@@ -129,6 +119,7 @@ class DrivenSimulation:
         r = self.result_at(p)
         if r._sensitivity is None:
             r._sensitivity = Sensitivity(self, r)
+        self.anchor = r
         return r._sensitivity
 
     def surface_jacobian(self, p):
