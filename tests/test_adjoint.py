@@ -93,23 +93,35 @@ def test_tangent_adjoint_and_finite_differences_agree(driven):
     assert np.linalg.norm(dX[names.index("jaw_rx")]) > 0
 
 
-def test_a_fit_comes_back_to_its_accepted_point_without_a_new_solve(small_expressive_model, monkeypatch):
-    """After rejected trials, a fit asks again for the surface at its accepted point (the
-    point whose derivatives it took): that solve is returned, not a new one warm-started from
-    the last rejected state (such a re-solve stalled at a relative residual of 2e-6 at the end
-    of an ICT jawOpen fit, and the fit crashed)."""
+def test_a_point_solved_before_is_solved_again_from_rest_when_the_warm_start_fails(
+        small_expressive_model, monkeypatch):
+    """A fit comes back to its accepted point after rejected trials, warm from the last
+    rejected state; where Newton stalls from there (at the end of an ICT jawOpen fit it did,
+    at a relative residual of 2e-6, and the fit crashed) the point is solved from rest. A
+    point never solved is not retried: the fit rejects that trial."""
+    from invface.sim.quasistatic import SimulationError
     ds = DrivenSimulation(small_expressive_model)
     K = ds.n_blendshapes
     p = [np.zeros(K + 6) for _ in range(3)]
     for q, v in zip(p, (0.5, 0.8, 0.65)):
         q[ds.parameter_names.index("lipCornerPull_L")] = v
     accepted = ds.result_at(p[0])
-    ds.surface_vjp(p[0], np.ones((len(small_expressive_model.neutral), 3)))   # derivatives: accepted
-    ds.result_at(p[1])                                                          # rejected trials
-    ds.result_at(p[2])
-    solves = []
-    monkeypatch.setattr(ds, "solve", lambda *a, **kw: solves.append(a))
-    assert ds.result_at(p[0]) is accepted and ds.surface(p[2]) is not None and not solves
+    ds.result_at(p[1])                                          # a rejected trial
+    calls, real = [], ds.sim.solve
+
+    def stalls_when_warm(*a, warm=None, **kw):
+        calls.append(warm is not None)
+        if warm is not None:
+            raise SimulationError("Newton did NOT converge (test)")
+        return real(*a, warm=warm, **kw)
+    monkeypatch.setattr(ds.sim, "solve", stalls_when_warm)
+    again = ds.result_at(p[0])
+    assert calls == [True, False] and again.sim.converged
+    assert np.abs(again.X - accepted.X).max() < 1e-6
+    calls.clear()
+    with pytest.raises(SimulationError):
+        ds.result_at(p[2])
+    assert calls == [True]
 
 
 def test_a_state_that_is_not_a_stable_equilibrium_has_no_derivatives(driven):

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..model.rig import JAW_NAMES, split_parameters
 from .poisson import track_displacements
-from .quasistatic import SimResult, Simulator
+from .quasistatic import SimResult, SimulationError, Simulator
 from .tracks import MuscleTracks, TrackState
 
 
@@ -59,7 +59,7 @@ class DrivenSimulation:
         self.n_blendshapes = K
         self.W = model.embedding_matrix()
         self.last = None
-        self.anchor = None         # the last solve whose derivatives were taken: a fit's accepted point
+        self.solved = set()        # parameter vectors (bytes) solved before: see result_at
         self.start = "last"        # where new solves start: see result_at
 
     def split(self, p):
@@ -78,6 +78,7 @@ class DrivenSimulation:
                              warm=warm.sim if warm is not None else None, contacts=contacts, **kw)
         out = DrivenResult(np.asarray(p, float).copy(), state, res)
         self.last = out
+        self.solved.add(out.p.tobytes())
         return out
 
     def surface_of(self, result):
@@ -90,17 +91,27 @@ class DrivenSimulation:
         return self.surface_of(self.result_at(p))
 
     def result_at(self, p):
-        """The DrivenResult at p: the last solve or the anchor (the last one whose derivatives
-        were taken: a fit coming back to its accepted point after rejected trials) when p is
-        theirs, else a new solve, warm from the last one (``start = "last"``) or cold, from
-        rest (``"rest"``). From rest the surface is a function of p alone; from the last
-        solve, contact planes and lip contacts depend on the path of earlier solves (up to
-        0.1 mm apart at the same p)."""
+        """The DrivenResult at p: the last one when p is unchanged, else a new solve, warm
+        from the last one (``start = "last"``) or cold, from rest (``"rest"``). From rest the
+        surface is a function of p alone; from the last solve, contact planes and lip
+        contacts depend on the path of earlier solves (up to 0.1 mm apart at the same p).
+
+        A warm solve at a p that was solved before and does not converge now is tried again
+        from rest: a fit coming back to its accepted point after rejected trials starts from
+        the last rejected state (at the end of an ICT jawOpen fit Newton stalled there at a
+        relative residual of 2e-6). A p never solved is not retried: a fit's trial that the
+        simulation cannot reach is rejected at the cost of one solve."""
         p = np.asarray(p, float).reshape(-1)
-        for r in (self.last, self.anchor):
-            if r is not None and np.array_equal(r.p, p):
-                return r
-        return self.solve(p, warm=None if self.start == "rest" else "last")
+        if self.last is not None and np.array_equal(self.last.p, p):
+            return self.last
+        if self.start == "rest":
+            return self.solve(p, warm=None)
+        try:
+            return self.solve(p, warm="last")
+        except SimulationError:
+            if p.tobytes() not in self.solved:
+                raise
+            return self.solve(p, warm=None)
 
     @contextmanager
     def starting_from(self, start):
@@ -119,7 +130,6 @@ class DrivenSimulation:
         r = self.result_at(p)
         if r._sensitivity is None:
             r._sensitivity = Sensitivity(self, r)
-        self.anchor = r
         return r._sensitivity
 
     def surface_jacobian(self, p):
