@@ -110,9 +110,9 @@ def creases(model, X, target):
     """The simulated skin's creases: the umbrella Laplacian |mean of neighbours - x| (mm) of
     the embedded surface beyond that of ``target``, 99.9th percentile / max, for the model's
     embedding and for the barycentric one (embed_tets/embed_weights)."""
-    out = []
+    out, own = [], umbrella(target, model.triangles)
     for W in (model.embedding_matrix(), barycentric_matrix(model.tets, model.embed_tets, model.embed_weights, len(X))):
-        c = (umbrella(W @ X, model.triangles) - umbrella(target, model.triangles)) * 1000
+        c = (umbrella(W @ X, model.triangles) - own) * 1000
         out.append(f"{np.quantile(c, 0.999):.2f} / {c.max():.2f}")
     return f"creases {out[0]} mm (barycentric {out[1]} mm)"
 

@@ -23,8 +23,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvfaceError
+from .tets import node_spacing, tets_within_rings
 
-_EDGES = ([0, 0, 0, 1, 1, 2], [1, 2, 3, 2, 3, 3])
 _MAX_COND = 1e6        # a point whose moment matrix is worse than this, or whose weights' absolute
 _MAX_LEBESGUE = 5.0    # sum exceeds this (a few nodes far to one side), keeps its barycentric row
 MLS = {"method": "moving_least_squares", "rings": 2, "radius": 1.5, "correct": True}   # morphed models' default
@@ -62,14 +62,6 @@ def barycentric_matrix(tets, tet_ids, weights, n_nodes):
                          shape=(V, n_nodes))
 
 
-def node_spacing(X, tets):
-    """Mean length (N,) m of the tet edges at each node (X (N,3), tets (T,4))."""
-    e = np.stack([tets[:, _EDGES[0]], tets[:, _EDGES[1]]], -1).reshape(-1, 2)
-    length = np.linalg.norm(X[e[:, 0]] - X[e[:, 1]], axis=1)
-    count = np.bincount(e.ravel(), minlength=len(X))
-    return np.bincount(e.ravel(), np.repeat(length, 2), minlength=len(X)) / np.maximum(count, 1)
-
-
 def moving_least_squares(X, tets, points, tet_ids, weights, rings=2, radius=1.5, correct=True):
     """Smooth embedding W (P, N) of ``points`` (P,3) m in the tet mesh (X (N,3) m, tets (T,4)).
 
@@ -104,11 +96,8 @@ def moving_least_squares(X, tets, points, tet_ids, weights, rings=2, radius=1.5,
 def _mls(X, tets, points, tet_ids, weights, rings, radius):
     """moving_least_squares without the nodal correction."""
     points = np.asarray(points, float).reshape(-1, 3)
-    T, N, P = len(tets), len(X), len(points)
-    M = sp.csr_matrix((np.ones(tets.size), (np.repeat(np.arange(T), 4), tets.ravel())), shape=(T, N))
-    C = sp.csr_matrix((np.ones(P), (np.arange(P), tet_ids)), shape=(P, T))
-    for _ in range(rings):
-        C = ((C @ M) @ M.T).tocsr()
+    N, P = len(X), len(points)
+    C, M = tets_within_rings(tets, N, tet_ids, rings)
     nodes = (C @ M).tocsr()
     nodes.sum_duplicates()
     pid = np.repeat(np.arange(P), np.diff(nodes.indptr))

@@ -10,6 +10,7 @@ import scipy.sparse as sp
 
 # The face opposite vertex k, ordered so its normal points out of a positive tet.
 _FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+TET_EDGES = ([0, 0, 0, 1, 1, 2], [1, 2, 3, 2, 3, 3])     # a tet's six edges: (first ends, second ends)
 
 
 def signed_volumes(X, tets):
@@ -92,8 +93,16 @@ def barycentric(X, tets, tet_ids, points):
 
 def mean_edge_length(X, tets):
     """Mean length (m) of the six edges of every tet (edges shared by tets count per tet)."""
-    e = X[tets[:, [0, 0, 0, 1, 1, 2]]] - X[tets[:, [1, 2, 3, 2, 3, 3]]]
+    e = X[tets[:, TET_EDGES[0]]] - X[tets[:, TET_EDGES[1]]]
     return float(np.linalg.norm(e, axis=2).mean())
+
+
+def node_spacing(X, tets):
+    """Mean length (N,) m of the tet edges at each node (X (N,3), tets (T,4))."""
+    e = np.stack([tets[:, TET_EDGES[0]], tets[:, TET_EDGES[1]]], -1).reshape(-1, 2)
+    length = np.linalg.norm(X[e[:, 0]] - X[e[:, 1]], axis=1)
+    count = np.bincount(e.ravel(), minlength=len(X))
+    return np.bincount(e.ravel(), np.repeat(length, 2), minlength=len(X)) / np.maximum(count, 1)
 
 
 def shape_gradients(X, tets):
@@ -165,17 +174,25 @@ def locate(X, tets, points, k=32):
     return cand[rows, best], bary[rows, best]
 
 
+def tets_within_rings(tets, n_nodes, start, rings):
+    """The tets within ``rings`` vertex-rings of each point's tet ``start`` (P,): sparse C (P, T)
+    with C[p, t] != 0 for those tets, and the tet-node incidence M (T, N) (so C @ M marks
+    their nodes). Both CSR, duplicates summed."""
+    T, P = len(tets), len(start)
+    M = sp.csr_matrix((np.ones(tets.size), (np.repeat(np.arange(T), 4), tets.ravel())), shape=(T, n_nodes))
+    C = sp.csr_matrix((np.ones(P), (np.arange(P), start)), shape=(P, T))
+    for _ in range(rings):
+        C = ((C @ M) @ M.T).tocsr()
+    C.sum_duplicates()
+    return C, M
+
+
 def locate_near(X, tets, points, start, rings=1):
     """Like ``locate``, but each point's candidates are the tets within ``rings`` vertex-rings
     of its tet ``start`` (P,) in the same mesh: a point keeps to its own side of a slit (lips,
     eyelids) that closes up in space. Returns tet ids (P,) and barycentric weights (P,4)."""
     points = np.asarray(points, float).reshape(-1, 3)
-    T, N = len(tets), len(X)
-    M = sp.csr_matrix((np.ones(tets.size), (np.repeat(np.arange(T), 4), tets.ravel())), shape=(T, N))
-    C = sp.csr_matrix((np.ones(len(points)), (np.arange(len(points)), start)), shape=(len(points), T))
-    for _ in range(rings):
-        C = ((C @ M) @ M.T).tocsr()
-    C.sum_duplicates()
+    C, _ = tets_within_rings(tets, len(X), start, rings)
     pid = np.repeat(np.arange(len(points)), np.diff(C.indptr))
     cand = C.indices
     score = np.empty(len(cand))
