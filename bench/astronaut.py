@@ -7,10 +7,11 @@
    eyelid, lip, nose and jaw curves and the face oval, which masks calibration and shading.
 2. Pose: the photo's camera is unknown; the default front camera (30 degree horizontal field
    of view) is assumed, and the pose and expression come from the curves (Eq. 15,
-   ``invface calibrate --auto-pose``). The paper's weights are scaled by the face's area in
-   pixels, (d / 224)^2 with d the outer eye-corner distance (224 px on the sample plates):
-   lambda_1 of Eq. 15 (its residuals are pixels) and lambda of Eq. 14 (its data term sums
-   over the face's pixels, its smoothness over the model's vertices).
+   ``invface calibrate --auto-pose``, ``invface.pipeline.auto_calibrate``). The paper's weights
+   are scaled by the face's area in pixels, (d / 224)^2 with d the outer eye-corner distance
+   (224 px on the sample plates; ``invface.fit.lambdas.face_scale``): lambda_1 of Eq. 15 (its
+   residuals are pixels) and lambda of Eq. 14 (its data term sums over the face's pixels, its
+   smoothness over the model's vertices).
 3. Calibration (Eq. 14) of SH light and albedo on the photo, with the curve-fitted shape.
 4. Plate fit (Eq. 15-16) with each model kind; the report (reports/astronaut/index.html)
    shows plate, render, wipe, error map and the curves; the script prints the curve
@@ -31,24 +32,17 @@ from pathlib import Path
 
 import numpy as np
 
-from invface import template
-from invface.cli import fit_plate_frame, plate_curves, pose_from_curves, run_calibration
+from invface import pipeline
 from invface.errors import InvfaceError
 from invface.fit import landmarks
+from invface.fit.lambdas import face_scale
 from invface.render.plates import load_plate, write_image, srgb_to_linear
 
-SAMPLE_EYE_PX = 224.0   # outer eye-corner distance on the sample plates (front camera, 720x540)
 NOTES = ["The astronaut (skimage.data.astronaut(), public domain) is a different person from the built-in "
          "model: the remaining curve and image error is mostly identity (proportions, nose and lip shape), "
          "not expression; the expression controls cannot absorb it.",
          "The photo's camera is unknown: the default front camera (30 degree field of view) is assumed, "
          "and the pose comes from the detector's curves."]
-
-
-def face_scale(curves):
-    """(face area relative to the sample plates' faces, outer eye-corner distance px)."""
-    d = float(np.linalg.norm(curves["eye_L_upper"][0] - curves["eye_R_upper"][0]))
-    return (d / SAMPLE_EYE_PX) ** 2, d
 
 
 def main():
@@ -67,22 +61,25 @@ def main():
     out = Path(a.output)
     t0 = time.perf_counter()
     photo = write_image(out / "astronaut.png", srgb_to_linear(astronaut() / 255.0))
-    model = template.build(resolution=a.resolution)
+    model = pipeline.load_model(resolution=a.resolution)
     plate = load_plate(photo)
     try:
-        curves, source = plate_curves(model, plate, None)
+        curves, source = pipeline.find_curves(model, plate)
         scale, eye_px = face_scale(curves)
-        lam = 3600.0 * scale
-        print(f"face: {eye_px:.0f} px between the outer eye corners; lambda_1 = {lam:.0f} (Eq. 15), "
-              f"lambda = {2500 * scale:.0f} (Eq. 14); face mask {int(plate.mask.sum())} px")
-        shape, rotation, translation = pose_from_curves(model, plate, None, lam)
-        cal = run_calibration(model, plate, out / "calib.npz", rotation, translation, 2500.0 * scale, 30, shape)
-        fits = fit_plate_frame(model, plate, cal, curves, a.kinds.split(","), out, iterations=a.iterations,
-                               source=source, title="invface: the astronaut photo (a real face, another identity)",
-                               lam_curves=lam, notes=NOTES)
+        calib = pipeline.auto_calibrate(model, plate, curves, source)
+        print(f"face: {eye_px:.0f} px between the outer eye corners; lambda_1 = {calib.pose.lam:.0f} (Eq. 15), "
+              f"lambda = {calib.calibration.lam:.0f} (Eq. 14); face mask {int(plate.mask.sum())} px")
+        print(calib.pose.describe())
+        print(calib.describe())
+        calib.save(out / "calib.npz")
+        frame = pipeline.fit_frame(model, plate, calib, curves, kinds=a.kinds.split(","), iterations=a.iterations,
+                                   source=source, notes=NOTES,
+                                   title="invface: the astronaut photo (a real face, another identity)")
+        print(f"report: {frame.save(out, model)}")
     except InvfaceError as e:
         sys.exit(f"error: {e}")
-    for kind, fit in fits.items():
+    for kind, fit in frame.fits.items():
+        print(frame.describe(kind))
         per = ", ".join(f"{k} {np.sqrt(np.mean(v ** 2)):.2f}" for k, v in fit.residual_px.items())
         print(f"{kind}: curve reprojection RMS {fit.curve_rms_px:.2f} px ({per})")
     print(f"total {time.perf_counter() - t0:.1f} s")

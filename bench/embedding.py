@@ -43,8 +43,8 @@ def main():
     X0, T, V = model.rest_positions, model.tets, len(model.neutral)
     args = (X0, T, model.neutral, model.embed_tets, model.embed_weights, MLS["rings"], MLS["radius"])
     ds = DrivenSimulation(model)
-    p = model.parameters({"lipCornerPull_L": 0.6, "jawOpen": 0.5})
-    p[-6:] = np.array(model.meta["blendshape_jaw"]["jawOpen"]) * 0.5
+    p = model.parameters({"weights": {"lipCornerPull_L": 0.6, "jawOpen": 0.5},
+                          "jaw": np.array(model.meta["blendshape_jaw"]["jawOpen"]) * 0.5})
     _, solve = timed(lambda: ds.solve(p, warm=None), 1)
     dX, tangent = timed(lambda: ds.sensitivity(p).tangent(), 1)
     P, N = dX.shape[:2]

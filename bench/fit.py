@@ -19,8 +19,9 @@ import time
 import numpy as np
 
 import invface
+from invface.fit.pose import pose_points, unpose_points
 from invface.fit.scan import fit_scan
-from invface.model.rig import euler_xyz
+from invface.model import FitVector
 
 
 def main():
@@ -31,18 +32,18 @@ def main():
     ap.add_argument("--no-scan", action="store_true", help="skip the scan fits")
     a = ap.parse_args()
     model = invface.template.build(resolution=a.resolution)
-    K = len(model.blendshape_names)
+    vec = FitVector.of(model)
     rng = np.random.default_rng(0)
-    p = np.r_[np.where(rng.random(K) < 0.3, rng.uniform(0.2, 0.8, K), 0), [0.08, 0, 0, 0, 0, 0]]
+    p = vec.controls_vector(np.where(rng.random(vec.K) < 0.3, rng.uniform(0.2, 0.8, vec.K), 0), [0.08, 0, 0, 0, 0, 0])
     rot, tr = np.array([0.05, -0.1, 0.02]), np.array([0.003, -0.002, 0.005])
-    print(f"head: {len(model.neutral)} vertices, {len(model.tets)} tets, K = {K}")
+    print(f"head: {len(model.neutral)} vertices, {len(model.tets)} tets, K = {vec.K}")
     if a.plates:
         plates(model, a.plates.split(","))
     if a.no_scan:
         return
     print(f"{'model':>11} {'lambda':>7} {'seconds':>8} {'its':>4} {'max |dp|':>9} {'max err mm':>10}")
     for kind in ("blendshape", "simulation"):
-        scan = model.surface_model(kind).surface(p) @ euler_xyz(rot).T + tr
+        scan = pose_points(model.surface_model(kind).surface(p), rot, tr)
         for lam in (1e-8, 1e-6):
             model._surface_models.clear()          # cold: no warm start from the scan's solve
             t0 = time.perf_counter()
@@ -52,7 +53,7 @@ def main():
                   f"{fit.error.max() * 1000:10.4f}", flush=True)
     # path dependence: the true controls solved warm (from the last fit's state) vs cold
     warm = model.surface_model("simulation").surface(p)
-    cold = (scan - tr) @ euler_xyz(rot)
+    cold = unpose_points(scan, rot, tr)
     d = np.linalg.norm(warm - cold, axis=1) * 1000
     print(f"simulation at the true controls, warm vs cold start: max {d.max():.3f} mm "
           f"(vertex {int(d.argmax())}), median {np.median(d):.4f} mm")
@@ -67,7 +68,6 @@ def plates(model, names):
     from invface.render.plates import load_plate
     from invface.fit.samples import write_sample_plates
     from invface.render.synthetic import skin_albedo, studio_light
-    K = len(model.blendshape_names)
     cal = Calibration(gamma=studio_light(), albedo=skin_albedo(model))
     print(f"{'plate':>18} {'model':>11} {'curves s':>8} {'shading s':>9} {'total s':>8} "
           f"{'posed mm':>8} {'shape mm':>8} {'max mm':>7} {'weights':>7} {'lip vol':>8}")
@@ -83,7 +83,7 @@ def plates(model, names):
                 sh = sum(v for k, v in fit.seconds.items() if k.startswith("shading"))
                 print(f"{path.stem:>18} {kind:>11} {fit.seconds['curves']:8.1f} {sh:9.1f} "
                       f"{fit.seconds['total']:8.1f} {np.median(posed) * 1000:8.3f} {np.median(shape) * 1000:8.3f} "
-                      f"{shape.max() * 1000:7.2f} {int(np.sum(fit.p[:K] > 1e-2)):7d} "
+                      f"{shape.max() * 1000:7.2f} {fit.nonzero_weights:7d} "
                       f"{100 * fit.lip_volume_change:+7.2f}%", flush=True)
 
 

@@ -15,6 +15,7 @@ import time
 import numpy as np
 
 import invface
+from invface.model import FitVector
 from invface.sim.adjoint import Sensitivity
 from invface.sim.driven import DrivenSimulation
 from invface.sim.poisson import track_displacements
@@ -67,7 +68,7 @@ def main():
     S.res.sim.solver                                     # factorised already: Jacobian cost alone
     _, t_jac = timed(S.surface_jacobian)
     print(f"  adjoint gradient {t_grad:.2f} s (ratio gradient/forward {t_grad / t_cold:.2f} cold, "
-          f"{t_grad / t_warm:.2f} warm); full Jacobian ({K + 6} controls) {t_jac:.2f} s")
+          f"{t_grad / t_warm:.2f} warm); full Jacobian ({len(p)} controls) {t_jac:.2f} s")
 
     big = copy.copy(model)
     big._surface_models = {}
@@ -76,7 +77,8 @@ def main():
     big.blendshape_activations = np.concatenate([model.blendshape_activations] * 2)
     big.track_displacements = np.concatenate([model.track_displacements, 0.5 * model.track_displacements])
     ds2 = DrivenSimulation(big)
-    p_big = np.concatenate([p[:K], np.zeros(K), p[K:]])
+    vec = FitVector.of(model)
+    p_big = FitVector.of(big).controls_vector(np.r_[p[vec.weights], np.zeros(K)], p[vec.jaw])
     t_grad2, _, g2 = gradient_seconds(ds2, p_big, gx)
     print(f"  with 2K = {2 * K} blendshapes: adjoint gradient {t_grad2:.2f} s (K: {t_grad:.2f} s); "
           f"same gradient on the first K: {np.abs(g2[:K] - g[:K]).max() / np.abs(g).max():.1e} rel")

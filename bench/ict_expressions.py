@@ -91,10 +91,9 @@ def main():
             fit = fit_scan(model, S, F, kind=kind, mode="nearest")
             secs = time.perf_counter() - t
             after = errors_mm(moving, fit.surface, model.triangles)
-            K = len(model.blendshape_names)
-            top = sorted(zip(model.blendshape_names, fit.p[:K]), key=lambda kv: -kv[1])[:3]
-            row[kind] = {"after_mm": after, "seconds": secs, "nonzero": int(np.sum(fit.p[:K] > 1e-3)),
-                         "jaw_rad": float(fit.p[K]), "rotation_deg": float(np.degrees(np.linalg.norm(fit.rotation))),
+            top = sorted(fit.weights.items(), key=lambda kv: -kv[1])[:3]
+            row[kind] = {"after_mm": after, "seconds": secs, "nonzero": fit.summary()["nonzero_weights"],
+                         "jaw_rad": float(fit.jaw[0]), "rotation_deg": float(np.degrees(np.linalg.norm(fit.rotation))),
                          "top": [(k, round(float(v), 3)) for k, v in top]}
             write_scan_fit(out / name / kind, model, fit, scan=f"ICT-FaceKit {name}", mode="nearest", lam=1e-6,
                            seconds=secs, notes=[f"error before the fit (neutral model): median {before[0]:.2f} mm, "

@@ -67,8 +67,7 @@ def main():
     free = DrivenSimulation(model, contact=False) if a.no_contact else None
     for n in names:
         j = np.array(model.meta["blendshape_jaw"][n])
-        p = model.parameters({n: 1.0})
-        p[-6:] = j
+        p = model.parameters({"weights": {n: 1.0}, "jaw": j})
         target = model.surface_model("blendshape").surface(p)
         moved = np.linalg.norm(target - model.neutral, axis=1) > 0.001
         t0 = time.perf_counter()
@@ -86,8 +85,7 @@ def main():
         if s:
             targets[n] = target
     own = invface.template.build(resolution=a.resolution)          # with its simulated expressions
-    p = own.parameters({"jawOpen": 1.0})
-    p[-6:] = own.meta["blendshape_jaw"]["jawOpen"]
+    p = own.parameters({"weights": {"jawOpen": 1.0}, "jaw": own.meta["blendshape_jaw"]["jawOpen"]})
     print(f"the template's own jawOpen (simulated when it was built): {deepest(DrivenSimulation(own).solve(p))}")
     for n, target in targets.items() if a.unsplit else ():
         print(f"{n} unsplit: {unsplit(model, n, target)}")

@@ -6,14 +6,34 @@ Public API (stable names)::
     model = invface.FaceModel.load("head.npz")
     model = invface.template.build(resolution=1.0)
     x = model.surface(w, kind="blendshape")
+
+    # the workflow (invface.pipeline), each returning a result with .save(...)
+    build = invface.build_model(neutral="actor.obj")       # .model, .save("actor.npz")
+    calib = invface.calibrate("neutral.png", model=model)  # Eq. 14
+    fit = invface.fit_plate("smile.png", calib, model=model, kinds="both")   # Eq. 15-16
+    scan = invface.fit_scan("scan.ply", model=model)       # Eq. 13
 """
 from ._env import configure_llvm as _configure_llvm
 
 _configure_llvm()
 
 from .errors import InvfaceError  # noqa: E402
-from .model import FaceModel, Muscle, Controls  # noqa: E402
+from .model import FaceModel, Muscle, Controls, FitVector, register_surface_model  # noqa: E402
+
+# the blendshape-driven muscle simulation (paper 000 Sec. 6), imported on first use
+register_surface_model("simulation", "invface.sim.driven:DrivenSimulation")
+
 from . import template  # noqa: E402
 
 __version__ = "0.1.0"
-__all__ = ["FaceModel", "Muscle", "Controls", "InvfaceError", "template", "__version__"]
+# the session layer's functions (invface.pipeline), imported on first use: importing invface
+# stays light, and the renderer and simulation load only when a fit needs them
+_PIPELINE = ("build_model", "fit_scan", "fit_plate", "calibrate", "simulate")
+__all__ = ["FaceModel", "Muscle", "Controls", "FitVector", "InvfaceError", "template", "__version__", *_PIPELINE]
+
+
+def __getattr__(name):
+    if name in _PIPELINE:
+        from . import pipeline
+        return getattr(pipeline, name)
+    raise AttributeError(f"module 'invface' has no attribute {name!r}")

@@ -35,3 +35,9 @@ class ImageError(InvfaceError):
 
 class CameraError(InvfaceError):
     """A camera file is missing fields, malformed, or disagrees with its plate."""
+
+
+class SimulationError(InvfaceError):
+    """A simulation could not reach or use an equilibrium (Newton did not converge, an
+    inverted tet, a state that is not a stable equilibrium). Optimisers treat it as a
+    rejected trial point."""

@@ -2,8 +2,10 @@ import subprocess
 import sys
 
 import numpy as np
+import trimesh
 
 from conftest import SMALL_RESOLUTION
+from invface.errors import InvfaceError, MeshError
 
 
 def run(*args, env=None):
@@ -48,6 +50,7 @@ def test_calibrate_command_writes_calibration_and_comparison(small_expressive_mo
             "--max-iter", "10", "-o", str(out))
     assert r.returncode == 0, r.stderr
     assert "pixel RMS" in r.stdout
+    assert "\r" not in r.stderr + r.stdout and "calibrate lighting" not in r.stderr   # no bar off a terminal
     cal = Calibration.load(out, vertex_count=len(m.neutral))
     assert cal.history[-1]["rms"] < 0.02 and cal.camera.size == (160, 120)
     assert (tmp_path / "calib_compare.png").stat().st_size > 1000
@@ -160,3 +163,40 @@ def test_fit_plate_on_a_folder_fits_the_frames_and_writes_the_sequence_page(smal
     r = run("report", str(out))                       # the report verb rewrites the sequence page
     assert r.returncode == 0, r.stderr
     assert "2 frames" in (out / "index.html").read_text()
+
+
+def test_cli_simulate(small_expressive_model, tmp_path, capsys):
+    from invface.cli import main
+    m = small_expressive_model
+    path = tmp_path / "m.npz"
+    m.save(path)
+    acts = tmp_path / "smile.json"
+    acts.write_text('{"activations": {"zygomaticus_major_L": 0.7}, "jaw": [0.05, 0, 0, 0, 0, 0]}')
+    rc = main(["simulate", "--model", str(path), "--activations", str(acts), "-o", str(tmp_path / "x.obj"),
+               "--preview", str(tmp_path / "p.png")])
+    out = capsys.readouterr().out
+    assert rc == 0 and "converged" in out and (tmp_path / "x.obj").exists() and (tmp_path / "p.png").exists()
+    assert main(["simulate", "--model", str(path), "--set", "zygomaticus_major_L=nan"]) == 2
+    assert "zygomaticus_major_L" in capsys.readouterr().err
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    assert main(["simulate", "--model", str(path), "--activations", str(bad)]) == 2
+    assert "bad.json" in capsys.readouterr().err
+    # blendshape-driven: weights drive the tracks, the activations are read out
+    rc = main(["simulate", "--model", str(path), "--weight", "lipCornerPull_L=1", "-o", str(tmp_path / "w.obj")])
+    out = capsys.readouterr().out
+    assert rc == 0 and "zygomaticus_major_L" in out and "converged" in out and (tmp_path / "w.obj").exists()
+    assert main(["simulate", "--model", str(path), "--weight", "smile=1"]) == 2
+    assert "unknown blendshape" in capsys.readouterr().err
+    assert main(["simulate", "--model", str(path), "--weight", "lipCornerPull_L=1", "--set", "mentalis_L=0.2"]) == 2
+
+
+def test_cli_rejects_a_sphere(tmp_path, capsys):
+    from invface.cli import main
+    trimesh.creation.icosphere(4, radius=90.0).export(tmp_path / "ball.obj")
+    rc = main(["build-model", "--neutral", str(tmp_path / "ball.obj"), "--resolution", "0.3",
+               "--expressions", "none", "-o", str(tmp_path / "x.npz")])
+    assert rc != 0
+    assert "face" in capsys.readouterr().err
+    assert not (tmp_path / "x.npz").exists()
+    assert isinstance(MeshError("x"), InvfaceError)

@@ -132,19 +132,20 @@ def test_astronaut_photo_pose_and_light(small_expressive_model):
         pytest.skip("landmark detector not installed")
     from skimage.data import astronaut
 
-    from invface.cli import plate_curves, pose_from_curves
-    from invface.fit.calibrate import calibrate
+    from invface.fit.lambdas import face_scale
+    from invface.pipeline import auto_calibrate, find_curves
     from invface.render.plates import Plate, srgb_to_linear
     img = srgb_to_linear(astronaut() / 255.0).astype(np.float32)
     m = small_expressive_model
     plate = Plate(image=img, camera=Camera.front_view(512, 512), path="astronaut.png")
-    curves, source = plate_curves(m, plate, None)
+    curves, source = find_curves(m, plate)
     assert source == "landmark detector" and 5000 < plate.mask.sum() < 15000
-    scale = (np.linalg.norm(curves["eye_L_upper"][0] - curves["eye_R_upper"][0]) / 224) ** 2
-    shape, rot, tr = pose_from_curves(m, plate, None, 3600 * scale)
+    scale = face_scale(curves)[0]
+    result = auto_calibrate(m, plate, curves, source, max_iter=15)      # lambdas scaled by the face's size
+    rot = result.pose.rotation
+    assert result.pose.lam == pytest.approx(3600 * scale) and result.calibration.lam == pytest.approx(2500 * scale)
     assert abs(rot[0]) < 0.2 and abs(rot[1]) < 0.1            # frontal (eyes and lips alone: 0.58 rad)
-    cal = calibrate(m.triangles, shape, img, plate.camera, rot, tr, lam=2500 * scale, mask=plate.mask,
-                    max_iter=15)
+    cal = result.calibration
     dc = cal.gamma[0]
     assert dc.min() > 0 and dc.max() / dc.min() < 1.3            # all-channel gauge: blue DC was 3.6x red
     assert np.mean(cal.albedo < 0) < 0.01                          # no black scalp (was 41 %)

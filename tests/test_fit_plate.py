@@ -8,7 +8,8 @@ from invface.errors import ImageError, InvfaceError
 from invface.fit.calibrate import Calibration
 from invface.fit.curves import PLATE_CURVES, projection_jacobian
 from invface.fit.plate import fit_plate, read_truth, vertex_errors, write_plate_fit
-from invface.fit.scan import posed_jacobian, posed_surface
+from invface.fit.pose import posed_jacobian, posed_surface
+from invface.model import FitVector
 from invface.fit.shading import Pyramid, ShadingObjective
 from invface.render.camera import Camera
 from invface.render.plates import Plate
@@ -27,7 +28,7 @@ def _truth(model, kind="blendshape"):
     p[model.blendshape_names.index("lipCornerPull_L")] = 0.7
     p[model.blendshape_names.index("lipCornerPull_R")] = 0.6
     p[model.blendshape_names.index("browInnerUp_L")] = 0.5
-    return p, posed_surface(model.surface_model(kind), np.r_[p, ROT, TR], K + 6)
+    return p, posed_surface(model.surface_model(kind), np.r_[p, ROT, TR], FitVector.of(model))
 
 
 def test_pyramid_is_opencv_pyrdown_and_its_adjoint_is_exact():
@@ -84,7 +85,7 @@ def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_m
                            jacobian_spp=16)
     z = np.r_[p * 0.6, ROT, TR]
     _, grad = obj(z)
-    xr, Jall = posed_jacobian(sm, z, P)
+    xr, Jall = posed_jacobian(sm, z, FitVector.of(m))
     r = obj._render(xr)[2]
     C = obj.image_jacobian(xr, Jall)
     assert C.shape == (P + 6, len(r))
@@ -98,7 +99,8 @@ def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_m
     for idx, h in ((names.index("lipCornerPull_L"), 0.02), (names.index("browInnerUp_L"), 0.05), (P + 3, 2e-4)):
         d = np.zeros_like(z)
         d[idx] = h
-        fd = (obj._render(posed_surface(sm, z + d, P)[1])[2] - obj._render(posed_surface(sm, z - d, P)[1])[2]) / (2 * h)
+        vec = FitVector.of(m)
+        fd = (obj._render(posed_surface(sm, z + d, vec)[1])[2] - obj._render(posed_surface(sm, z - d, vec)[1])[2]) / (2 * h)
         assert np.linalg.norm(C[idx]) == pytest.approx(np.linalg.norm(fd), rel=0.15), idx
 
 
@@ -222,7 +224,7 @@ def test_shading_dogleg_log_stays_aligned_when_a_trial_fails(small_expressive_mo
     """A trial the simulation cannot reach is a rejected dogleg step, logged as failed, so
     each later log entry still carries its own trial's verdict."""
     from invface.fit import shading
-    from invface.sim.quasistatic import SimulationError
+    from invface.errors import SimulationError
     m = small_expressive_model
     cam, p, g, a, plate = _shading_scene(m)
     real, calls = shading.ShadingObjective.normal_equations, []

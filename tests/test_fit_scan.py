@@ -167,11 +167,13 @@ def test_nearest_mode_jacobian_matches_finite_differences(small_expressive_model
     """Both pair sets of the symmetric point-to-plane objective (model-to-scan and
     scan-to-model, barycentric) differentiate correctly in controls and pose."""
     from invface.fit.scan import _closest, _Objective
+    from invface.model import FitVector
     m = small_expressive_model
-    P = len(m.blendshape_names) + 6
-    obj = _Objective(m.surface_model("blendshape"), 1e-6, P)
+    vec = FitVector.of(m)
+    P = vec.P
+    obj = _Objective(m.surface_model("blendshape"), 1e-6, vec)
     rng = np.random.default_rng(3)
-    z = np.r_[rng.uniform(0, 0.4, P - 6), [0.05, 0, 0, 0, 0, 0], ROT, TR]
+    z = vec.pack(weights=rng.uniform(0, 0.4, vec.K), jaw=[0.05, 0, 0, 0, 0, 0], rotation=ROT, translation=TR)
     _, xr = obj.posed(z)
     S = m.neutral[::7] + rng.normal(0, 0.002, (len(m.neutral[::7]), 3))
     y = xr[::5] + rng.normal(0, 0.001, (len(xr[::5]), 3))

@@ -4,7 +4,7 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
-from invface.errors import InvfaceError, MeshError
+from invface.errors import MeshError
 from invface.mesh.closest import closest_points
 from invface.morph.blendshapes import read_blendshapes, recognised
 from invface.morph.build import build_model
@@ -355,14 +355,3 @@ def test_imported_jaw_shape_drives_the_simulation(small_expressive_model, tmp_pa
         sim_x = model.surface_model("simulation").surface(p)
         d = closest_points(sim_x[on], truth, tpl.triangles)[2]
         assert d.mean() < 0.001 and np.quantile(d, 0.95) < 0.003, (name, d.mean(), np.quantile(d, 0.95))
-
-
-def test_cli_rejects_a_sphere(tmp_path, capsys):
-    from invface.cli import main
-    trimesh.creation.icosphere(4, radius=90.0).export(tmp_path / "ball.obj")
-    rc = main(["build-model", "--neutral", str(tmp_path / "ball.obj"), "--resolution", "0.3",
-               "--expressions", "none", "-o", str(tmp_path / "x.npz")])
-    assert rc != 0
-    assert "face" in capsys.readouterr().err
-    assert not (tmp_path / "x.npz").exists()
-    assert isinstance(MeshError("x"), InvfaceError)

@@ -249,29 +249,3 @@ def test_template_expression_blendshapes(small_expressive_model):
         x = m.surface(blendshape_pose(m, name))
         gap = x[m.curves["lip_inner_upper"], 1].mean() - x[m.curves["lip_inner_lower"], 1].mean()
         assert gap > 0.004, name
-
-
-def test_cli_simulate(small_expressive_model, tmp_path, capsys):
-    from invface.cli import main
-    m = small_expressive_model
-    path = tmp_path / "m.npz"
-    m.save(path)
-    acts = tmp_path / "smile.json"
-    acts.write_text('{"activations": {"zygomaticus_major_L": 0.7}, "jaw": [0.05, 0, 0, 0, 0, 0]}')
-    rc = main(["simulate", "--model", str(path), "--activations", str(acts), "-o", str(tmp_path / "x.obj"),
-               "--preview", str(tmp_path / "p.png")])
-    out = capsys.readouterr().out
-    assert rc == 0 and "converged" in out and (tmp_path / "x.obj").exists() and (tmp_path / "p.png").exists()
-    assert main(["simulate", "--model", str(path), "--set", "zygomaticus_major_L=nan"]) == 2
-    assert "zygomaticus_major_L" in capsys.readouterr().err
-    bad = tmp_path / "bad.json"
-    bad.write_text("{not json")
-    assert main(["simulate", "--model", str(path), "--activations", str(bad)]) == 2
-    assert "bad.json" in capsys.readouterr().err
-    # blendshape-driven: weights drive the tracks, the activations are read out
-    rc = main(["simulate", "--model", str(path), "--weight", "lipCornerPull_L=1", "-o", str(tmp_path / "w.obj")])
-    out = capsys.readouterr().out
-    assert rc == 0 and "zygomaticus_major_L" in out and "converged" in out and (tmp_path / "w.obj").exists()
-    assert main(["simulate", "--model", str(path), "--weight", "smile=1"]) == 2
-    assert "unknown blendshape" in capsys.readouterr().err
-    assert main(["simulate", "--model", str(path), "--weight", "lipCornerPull_L=1", "--set", "mentalis_L=0.2"]) == 2

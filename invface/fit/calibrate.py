@@ -60,8 +60,8 @@ from ..render import shading
 from ..render.camera import Camera
 from ..render.renderer import FaceRenderer
 from ..sim.linsolve import MatrixPattern, make_solver
+from .lambdas import EQ14_LAMBDA
 
-LAMBDA = 2500.0                            # paper 000, Eq. 14
 UNSEEN_PULL = 1e-4                         # weight (x lambda) pulling unseen albedo to the mean
 SKIN_ALBEDO = shading.SKIN_ALBEDO           # default mean albedo (the gauge)
 
@@ -75,7 +75,7 @@ class Calibration:
     rotation: np.ndarray = field(default_factory=lambda: np.zeros(3))
     translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
     camera: Camera | None = None
-    lam: float = LAMBDA
+    lam: float = EQ14_LAMBDA
     history: list = field(default_factory=list)
     plate: str = ""
 
@@ -113,7 +113,7 @@ class Calibration:
         meta = json.loads(str(data["meta"])) if "meta" in data else {}
         cam = Camera.from_dict(meta["camera"], source=str(path)) if meta.get("camera") else None
         return cls(gamma=data["gamma"], albedo=alb, rotation=data["rotation"],
-                   translation=data["translation"], camera=cam, lam=meta.get("lam", LAMBDA),
+                   translation=data["translation"], camera=cam, lam=meta.get("lam", EQ14_LAMBDA),
                    history=meta.get("history", []), plate=meta.get("plate", ""))
 
 
@@ -180,7 +180,7 @@ scalp in every render; with the pull, none. It fades the extension to the gauge'
 
 
 def calibrate(model_triangles, x, plate_image, camera, rotation=None, translation=None,
-              lam=LAMBDA, albedo_mean=SKIN_ALBEDO, mask=None, max_iter=30, tol=1e-7,
+              lam=EQ14_LAMBDA, albedo_mean=SKIN_ALBEDO, mask=None, max_iter=30, tol=1e-7,
               gamma0=None, albedo0=None, samples=3, progress=None):
     """Solve Eq. 14 for gamma (9,3) and albedo (V,3) on one plate.
 

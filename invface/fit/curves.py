@@ -27,11 +27,11 @@ import numpy as np
 from ..errors import InvfaceError
 from ..jsonfile import read_object
 from ..mesh.sections import resample_even as resample
+from ..model.controls import FitVector
 from .dogleg import dogleg
-from .scan import control_bounds, posed_jacobian, posed_surface, regulariser
+from .lambdas import EQ15_LAMBDA_1, EQ15_TRACK_LAMBDA
+from .pose import pose_points, posed_jacobian, posed_surface, regulariser
 
-LAMBDA_1 = 3600.0          # paper 000, Eq. 15 (pixel residuals)
-TRACK_LAMBDA = 1.0         # weight regulariser of the pose pass (px^2 per unit weight^2)
 PLATE_CURVES = ("lip_outer_upper", "lip_outer_lower", "lip_inner_upper", "lip_inner_lower",
                 "eye_L_upper", "eye_L_lower", "eye_R_upper", "eye_R_lower")
 
@@ -135,7 +135,7 @@ class CurveObjective:
 
     def __init__(self, model, surface_model, camera, curves, lam):
         self.model, self.sm, self.camera, self.lam = model, surface_model, camera, lam
-        self.P = len(model.blendshape_names) + 6
+        self.vec = FitVector.of(model)
         self.curves = {k: v for k, v in curves.items() if k in model.curves}
         self.vertices = {k: np.asarray(model.curves[k]) for k in self.curves}
 
@@ -148,14 +148,14 @@ class CurveObjective:
         return out
 
     def __call__(self, z):
-        xr, Jall = posed_jacobian(self.sm, z, self.P)
+        xr, Jall = posed_jacobian(self.sm, z, self.vec)
         rows, jac = self.rows(xr, Jall)
-        reg, Jreg = regulariser(z, self.P, self.lam)
+        reg, Jreg = regulariser(z, self.vec, self.lam)
         return np.concatenate(rows + [reg]), np.vstack(jac + [Jreg])
 
     def rows(self, xr, Jall):
-        """Signed distances (lists of (n,) px per curve) and their Jacobians ((n, P+6) each)
-        at the posed surface xr (V, 3) with d xr / dz = Jall (P+6, V, 3)."""
+        """Signed distances (lists of (n,) px per curve) and their Jacobians ((n, z size) each)
+        at the posed surface xr (V, 3) with d xr / dz = Jall (z size, V, 3)."""
         rows, jac = [], []
         for name, poly in self.curves.items():
             vid = self.vertices[name]
@@ -164,6 +164,19 @@ class CurveObjective:
             rows.append(np.einsum("ni,ni->n", uv - foot, nrm))
             jac.append(np.einsum("ni,nij,knj->nk", nrm, duv, Jall[:, vid]))
         return rows, jac
+
+    def position_gradient(self, xr):
+        """(signed distances (n,) px of all curves, their gradient (V, 3) of 1/2 |rows|^2 with
+        respect to the posed vertices xr (V, 3)): the curve term for one adjoint product."""
+        rows, g = [], np.zeros_like(np.asarray(xr, float))
+        for name, poly in self.curves.items():
+            vid = self.vertices[name]
+            uv, duv = projection_jacobian(self.camera, xr[vid])
+            foot, nrm = closest_on_polyline(uv, poly, normals=True)
+            r = np.einsum("ni,ni->n", uv - foot, nrm)
+            np.add.at(g, vid, r[:, None] * np.einsum("ni,nij->nj", nrm, duv))
+            rows.append(r)
+        return np.concatenate(rows) if rows else np.zeros(0), g
 
 
 def initial_pose(model, camera, curves, rotation=None, translation=None, samples=20):
@@ -178,7 +191,7 @@ def initial_pose(model, camera, curves, rotation=None, translation=None, samples
     for name, poly in curves.items():
         o, q = resample(model.neutral[model.curves[name]], samples), resample(poly, samples)
         # pair points in the model curve's direction (plate curves may run either way)
-        u, _ = camera.project(o @ euler_xyz(th).T + t)
+        u, _ = camera.project(pose_points(o, th, t))
         if np.linalg.norm(u[[0, -1]] - q[[0, -1]]) > np.linalg.norm(u[[0, -1]] - q[[-1, 0]]):
             q = q[::-1]
         obj.append(o)
@@ -197,31 +210,28 @@ def initial_pose(model, camera, curves, rotation=None, translation=None, samples
     return th, camera.R.T @ (tvec.ravel() - camera.t)
 
 
-def fit_curves(model, camera, curves, kind="blendshape", lam=LAMBDA_1, p0=None, rotation=None,
+def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=None, rotation=None,
                translation=None, solve_pose=True, max_iter=200, progress=None):
     """Solve Eq. 15: controls from plate curves, and first the rigid pose. Returns a CurveFit.
 
     The paper's pose comes from tracked features; here, with ``solve_pose``, it comes from
     the curves: solvePnP on the neutral curves, then a tracking pass over pose and controls
-    with the weak ``TRACK_LAMBDA``, so the expression does not have to be explained by the
+    with the weak ``EQ15_TRACK_LAMBDA``, so the expression does not have to be explained by the
     pose (with lambda_1 = 3600 the weights of a smile stay near 0.05 and the pose turns and
     shifts to make up for it: 0.06 rad and 12 mm off on the sample smile plate). Eq. 15 then
     solves the controls from that pose. The history logs both passes ("pass": "pose" or
     "controls")."""
     if not curves:
         raise InvfaceError("no plate curves to fit")
-    sm = model.surface_model(kind)
-    P = len(model.blendshape_names) + 6
-    z = np.r_[np.zeros(P) if p0 is None else np.asarray(p0, float),
-              np.zeros(3) if rotation is None else rotation,
-              np.zeros(3) if translation is None else translation]
-    lo, hi = control_bounds(model)
+    sm, vec = model.surface_model(kind), FitVector.of(model)
+    z = vec.pack(p0, rotation, translation)
+    lo, hi = vec.bounds()
     history = []
 
     def solve(z, lam, pose, name):
         lo_, hi_ = lo.copy(), hi.copy()
         if not pose:
-            lo_[P:], hi_[P:] = z[P:], z[P:]
+            lo_[vec.pose], hi_[vec.pose] = z[vec.pose], z[vec.pose]
         log = (lambda h: progress(dict(h, **{"pass": name}))) if progress else None
         res = dogleg(CurveObjective(model, sm, camera, curves, lam), z, lo_, hi_, max_iter=max_iter,
                      progress=log)
@@ -230,12 +240,14 @@ def fit_curves(model, camera, curves, kind="blendshape", lam=LAMBDA_1, p0=None, 
 
     tracked = None
     if solve_pose:
-        z[P:P + 3], z[P + 3:] = initial_pose(model, camera, curves, z[P:P + 3], z[P + 3:])
-        z = solve(z, TRACK_LAMBDA, True, "pose").x
-        tracked = z[:P].copy()
+        _, rot, tr = vec.unpack(z)
+        z = vec.with_pose(z, *initial_pose(model, camera, curves, rot, tr))
+        z = solve(z, EQ15_TRACK_LAMBDA, True, "pose").x
+        tracked = vec.unpack(z)[0]
     res = solve(z, lam, False, "controls")
     obj = CurveObjective(model, sm, camera, curves, lam)
-    _, xr = posed_surface(sm, res.x, P)
+    _, xr = posed_surface(sm, res.x, vec)
     resid = {k: np.linalg.norm(v, axis=1) for k, v in obj.residuals(xr).items()}
-    return CurveFit(p=res.x[:P], rotation=res.x[P:P + 3], translation=res.x[P + 3:],
+    p, rot, tr = vec.unpack(res.x)
+    return CurveFit(p=p, rotation=rot, translation=tr,
                     residual_px=resid, history=history, status=res.status, tracked=tracked)

@@ -25,8 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError
-from ..sim.quasistatic import SimulationError
+from ..errors import ConfigError, SimulationError
 
 
 @dataclass

@@ -27,11 +27,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ImageError, InvfaceError
-from ..sim.quasistatic import SimulationError
-from .curves import LAMBDA_1, CurveObjective, fit_curves, projection_jacobian, rms_px
+from ..errors import ImageError, InvfaceError, SimulationError
+from ..model.controls import FitVector
+from .curves import CurveObjective, fit_curves, projection_jacobian, rms_px
+from .lambdas import EQ15_LAMBDA_1
+from .pose import posed_surface, unpose_points
 from .results import write_fit_files
-from .scan import posed_surface
 from .shading import fit_shading
 
 
@@ -41,6 +42,7 @@ class PlateFit:
     (H, W, 3) linear, per-curve pixel residuals, the log of both stages, seconds per stage."""
 
     kind: str
+    vector: FitVector
     p: np.ndarray
     rotation: np.ndarray
     translation: np.ndarray
@@ -58,14 +60,29 @@ class PlateFit:
     def curve_rms_px(self):
         return rms_px(self.residual_px)
 
-    def summary(self, model):
+    @property
+    def z(self):
+        """The fit vector (``FitVector``): controls and pose."""
+        return self.vector.pack(self.p, self.rotation, self.translation)
+
+    @property
+    def weights(self):
+        """{blendshape name: weight}."""
+        return self.vector.weights_dict(self.p)
+
+    @property
+    def jaw(self):
+        """(6,) jaw parameters."""
+        return self.p[self.vector.jaw].copy()
+
+    @property
+    def nonzero_weights(self):
+        return int(np.sum(self.p[self.vector.weights] > 1e-2))
+
+    def summary(self, model=None):
         """JSON-ready dict of the result (weights by name, jaw, pose, activations, errors)."""
-        K = len(model.blendshape_names)
-        return {"kind": self.kind, "status": self.status,
-                "weights": dict(zip(model.blendshape_names, np.round(self.p[:K], 6).tolist())),
-                "jaw": self.p[K:].tolist(), "rotation": self.rotation.tolist(),
-                "translation": self.translation.tolist(),
-                "nonzero_weights": int(np.sum(self.p[:K] > 1e-2)),
+        return {"kind": self.kind, "status": self.status, **self.vector.to_dict(self.z),
+                "nonzero_weights": self.nonzero_weights,
                 "activations": {k: round(v, 6) for k, v in self.activations.items()},
                 "active_muscles": int(sum(v > 1e-2 for v in self.activations.values())),
                 "curve_rms_px": self.curve_rms_px, "image_rms": self.image_rms,
@@ -87,7 +104,7 @@ def check_plate(plate, path=""):
 
 def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, shading=True,
               max_iter_curves=200, max_iter_shading=25, spp=8,
-              lam_curves=LAMBDA_1, solver="dogleg", progress=None):
+              lam_curves=EQ15_LAMBDA_1, solver="dogleg", progress=None):
     """Fit one plate. plate: ``render.plates.Plate`` (linear, undistorted; its mask, if any,
     restricts the shading term); calibration: ``fit.calibrate.Calibration`` (gamma, albedo);
     curves: {name: (n, 2) px} plate curves; kind: "blendshape" or "simulation"; start: the
@@ -133,9 +150,8 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
         seconds[stage] = time.perf_counter() - t1
         p, rot, tr = sf.p, sf.rotation, sf.translation
         status += f"; {stage}: {sf.status}"
-    sm = model.surface_model(kind)
-    P = len(p)
-    _, xr = posed_surface(sm, np.r_[p, rot, tr], P)
+    sm, vec = model.surface_model(kind), FitVector.of(model)
+    _, xr = posed_surface(sm, vec.pack(p, rot, tr), vec)
     from ..measure.volume import lip_volume_change
     from ..render.renderer import FaceRenderer
     render = FaceRenderer(model.triangles, cam, spp=spp, backplate=plate.image).image(
@@ -149,7 +165,7 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
         acts = {m.name: float(v) for m, v in zip(model.muscles, res.tracks.activations)}
         X = res.X
     seconds["total"] = time.perf_counter() - t0
-    return PlateFit(kind=kind, p=p, rotation=rot, translation=tr, surface=xr, render=render,
+    return PlateFit(kind=kind, vector=vec, p=p, rotation=rot, translation=tr, surface=xr, render=render,
                     residual_px=residual, image_rms=float(np.sqrt(np.mean((render - plate.image)[inside] ** 2))),
                     history=history, seconds=seconds, activations=acts,
                     lip_volume_change=lip_volume_change(model, p, X), status=status)
@@ -182,28 +198,21 @@ def read_truth(path, model):
     it names, and the dict."""
     from ..jsonfile import read_object
     t = read_object(path, what="ground-truth file")
+    vec = FitVector.of(model)
     try:
-        K = len(model.blendshape_names)
-        p = np.zeros(K + 6)
-        for name, v in t["weights"].items():
-            p[model.blendshape_names.index(name)] = float(v)
-        p[K:] = np.asarray(t.get("jaw", np.zeros(6)), float)
-        z = np.r_[p, np.asarray(t["rotation"], float), np.asarray(t["translation"], float)]
+        z = vec.from_dict({"weights": t["weights"], "jaw": t.get("jaw", np.zeros(6)),
+                           "rotation": t["rotation"], "translation": t["translation"]}, what=str(path))
         kind = t["kind"]
     except (KeyError, ValueError, TypeError) as e:
         raise InvfaceError(f"{path}: bad ground-truth file ({e})") from None
-    return posed_surface(model.surface_model(kind), z, K + 6)[1], t
+    return posed_surface(model.surface_model(kind), z, vec)[1], t
 
 
 def vertex_errors(model, fit, truth_surface, truth):
     """Per-vertex distances (V,) m to the truth: posed (what the camera sees, including the
     depth error of the monocular pose) and shape only (both surfaces unposed: the shape the
     controls make)."""
-    from ..model.rig import euler_xyz
-
-    def unpose(x, rot, tr):
-        return (x - np.asarray(tr, float)) @ euler_xyz(np.asarray(rot, float))
     posed = np.linalg.norm(fit.surface - truth_surface, axis=1)
-    shape = np.linalg.norm(unpose(fit.surface, fit.rotation, fit.translation)
-                           - unpose(truth_surface, truth["rotation"], truth["translation"]), axis=1)
+    shape = np.linalg.norm(unpose_points(fit.surface, fit.rotation, fit.translation)
+                           - unpose_points(truth_surface, truth["rotation"], truth["translation"]), axis=1)
     return posed, shape

@@ -42,32 +42,30 @@ def write_sample_plates(model, folder, names=None, size=(720, 540), noise=0.005,
     import json
     from pathlib import Path
 
-    from ..model.rig import euler_xyz
+    from ..model.controls import FitVector
     from ..render.plates import write_image
+    from .pose import pose_points
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     cam = sample_camera(*size)
     gamma, albedo = studio_light(), skin_albedo(model)
-    K = len(model.blendshape_names)
+    vec = FitVector.of(model)
     out = []
     for i, name in enumerate(names or SAMPLES):
         kind, weights, jaw, rot, tr = SAMPLES[name]
         if progress:
             progress(f"plate {name} ({kind} model)")
-        p = np.zeros(K + 6)
-        for k, v in weights.items():
-            p[model.blendshape_names.index(k)] = v
-        if jaw is not None:
-            p[K:] = jaw
+        z = vec.from_dict({"weights": weights, "jaw": np.zeros(6) if jaw is None else jaw})
+        p = vec.unpack(z)[0]
         x = model.surface_model(kind).surface(p)
         image, _ = render_plate(model, x, cam, gamma, albedo, rot, tr, noise=noise, seed=i)
         path = write_image(folder / f"{name}.png", image)
         cam.save(folder / f"{name}.json")
-        truth = {"kind": kind, "weights": weights, "jaw": p[K:].tolist(), "rotation": list(rot),
+        truth = {"kind": kind, "weights": weights, "jaw": p[vec.jaw].tolist(), "rotation": list(rot),
                  "translation": list(tr), "light": "studio_light()", "albedo": "skin_albedo(model, seed=0)",
                  "noise": noise}
         (folder / f"{name}.truth.json").write_text(json.dumps(truth, indent=1))
-        xr = x @ euler_xyz(np.asarray(rot)).T + np.asarray(tr)
+        xr = pose_points(x, rot, tr)
         rng = np.random.default_rng(100 + i)
         curves = {c: projection_jacobian(cam, xr[model.curves[c]])[0] for c in PLATE_CURVES}
         curves = {c: v + rng.normal(0, curve_noise, v.shape) for c, v in curves.items()}

@@ -25,6 +25,7 @@ Two correspondence modes:
 """
 from __future__ import annotations
 
+import time
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 
@@ -33,17 +34,19 @@ import numpy as np
 from ..errors import InvfaceError
 from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.triangles import boundary_vertices, face_normals
-from ..model.rig import JAW_LOWER, JAW_UPPER, euler_xyz, euler_xyz_derivatives
+from ..model.controls import FitVector
+from ..model.rig import JAW_LOWER, JAW_UPPER
 from .dogleg import dogleg
+from .lambdas import EQ13_LAMBDA
+from .pose import posed_jacobian, posed_surface, regulariser
 from .results import write_fit_files
-
-LAMBDA = 1e-6          # paper 000, Eq. 13
 
 
 @dataclass
 class ScanFit:
     """Result: parameters p = (b, jaw), rigid pose, surfaces, per-vertex error, the log."""
 
+    vector: FitVector
     p: np.ndarray
     rotation: np.ndarray
     translation: np.ndarray
@@ -53,68 +56,46 @@ class ScanFit:
     history: list = field(default_factory=list)
     status: str = ""
     activations: dict = field(default_factory=dict)   # muscle -> activation (simulation fits)
+    seconds: float = 0.0
 
-    def summary(self, model):
+    @property
+    def z(self):
+        return self.vector.pack(self.p, self.rotation, self.translation)
+
+    @property
+    def weights(self):
+        """{blendshape name: weight}."""
+        return self.vector.weights_dict(self.p)
+
+    @property
+    def jaw(self):
+        """(6,) jaw parameters."""
+        return self.p[self.vector.jaw].copy()
+
+    def summary(self, model=None):
         """JSON-ready dict: weights by name, jaw, pose, activations, error statistics in mm."""
-        K = len(model.blendshape_names)
         e = self.error[np.isfinite(self.error)] * 1000
         return {"kind": self.kind, "status": self.status, "iterations": len(self.history),
-                "weights": dict(zip(model.blendshape_names, np.round(self.p[:K], 6).tolist())),
-                "jaw": self.p[K:].tolist(), "rotation": self.rotation.tolist(),
-                "translation": self.translation.tolist(),
-                "nonzero_weights": int(np.sum(self.p[:K] > 1e-3)),
+                **self.vector.to_dict(self.z),
+                "nonzero_weights": int(np.sum(self.p[self.vector.weights] > 1e-3)),
                 "activations": {k: round(v, 6) for k, v in self.activations.items()},
                 "error_mm": {"median": float(np.median(e)), "mean": float(e.mean()),
                              "max": float(e.max())}}
 
 
-def posed_surface(surface_model, z, P):
-    """Unposed x (V,3) and posed x_R = R(theta) x + t (V,3) for z = (p (P,), theta, t)."""
-    x = surface_model.surface(z[:P])
-    return x, x @ euler_xyz(z[P:P + 3]).T + z[P + 3:]
-
-
-def posed_jacobian(surface_model, z, P):
-    """x_R (V,3) and d x_R / dz (P+6, V, 3) for z = (p, theta (3,), t (3,))."""
-    p, th = z[:P], z[P:P + 3]
-    x, xr = posed_surface(surface_model, z, P)
-    Jx = surface_model.surface_jacobian(p) @ euler_xyz(th).T            # (P, V, 3)
-    Jth = np.einsum("kij,vj->kvi", euler_xyz_derivatives(th), x)        # (3, V, 3)
-    Jt = np.broadcast_to(np.eye(3)[:, None, :], (3, len(x), 3))
-    return xr, np.concatenate([Jx, Jth, Jt])
-
-
-def control_bounds(model):
-    """Box (lower, upper) on z = (b, jaw, theta, t): blendshape weights in [0, 1]; the jaw
-    within its anatomical range (opening -0.1..0.6 rad about the hinge, +-0.15 rad sideways
-    and twist, +-8 mm translation); the rigid pose free."""
-    K = len(model.blendshape_names)
-    lo = np.r_[np.zeros(K), JAW_LOWER, np.full(6, -np.inf)]
-    hi = np.r_[np.ones(K), JAW_UPPER, np.full(6, np.inf)]
-    return lo, hi
-
-
-def regulariser(z, P, lam, center=None):
-    """Rows sqrt(lam) (p - center) and their Jacobian (P, P+6): the lambda |w|^2 terms."""
-    c = 0 if center is None else center
-    J = np.zeros((P, P + 6))
-    J[:, :P] = np.sqrt(lam) * np.eye(P)
-    return np.sqrt(lam) * (z[:P] - c), J
-
-
 class _Objective:
-    """z = (p (P,), theta (3,), t (3,)) -> residual and Jacobian of Eq. 13."""
+    """z = (p, theta (3,), t (3,)) (``FitVector``) -> residual and Jacobian of Eq. 13."""
 
-    def __init__(self, surface_model, lam, P):
-        self.sm, self.lam, self.P = surface_model, lam, P
+    def __init__(self, surface_model, lam, vec):
+        self.sm, self.lam, self.vec = surface_model, lam, vec
         self.pairs = None                  # (vertex ids, scan points, scan normals) in nearest mode
         self.back = None                   # (model triangles' vertex ids, barycentrics, scan points, model normals)
 
     def posed(self, z):
-        return posed_surface(self.sm, z, self.P)
+        return posed_surface(self.sm, z, self.vec)
 
     def __call__(self, z, target=None):
-        xr, Jall = posed_jacobian(self.sm, z, self.P)
+        xr, Jall = posed_jacobian(self.sm, z, self.vec)
         if self.pairs is None:
             r = (xr - target).ravel()
             J = Jall.reshape(len(Jall), -1).T
@@ -127,7 +108,7 @@ class _Objective:
                 rb = np.einsum("ij,ij->i", np.einsum("ia,iaj->ij", b, xr[tv]) - yb, nb)
                 Jb = sum(b[:, a, None] * np.einsum("kij,ij->ik", Jall[:, tv[:, a]], nb) for a in range(3))
                 r, J = np.r_[r, rb], np.vstack([J, Jb])
-        reg, Jreg = regulariser(z, self.P, self.lam)
+        reg, Jreg = regulariser(z, self.vec, self.lam)
         return np.r_[r, reg], np.vstack([J, Jreg])
 
 
@@ -149,13 +130,11 @@ def capped_distance(model_surface, triangles, scan, scan_faces, cap, model_borde
 def search_jaw(model, z, scan, scan_faces, cap, model_border, scan_border):
     """The hinge opening (rad) for z = (p, theta, t) that brings the blendshape rig closest to
     the scan (``capped_distance``): JAW_SEARCH, then +-0.05 rad about the best."""
-    sm, K, P = model.surface_model("blendshape"), len(model.blendshape_names), len(z) - 6
+    sm, vec = model.surface_model("blendshape"), FitVector.of(model)
 
     def cost(h):
-        zz = z.copy()
-        zz[K] = h
-        return capped_distance(posed_surface(sm, zz, P)[1], model.triangles, scan, scan_faces,
-                               cap, model_border, scan_border)
+        return capped_distance(posed_surface(sm, vec.with_hinge(z, h), vec)[1], model.triangles, scan,
+                               scan_faces, cap, model_border, scan_border)
 
     costs = {float(h): cost(h) for h in JAW_SEARCH}
     best = min(costs, key=costs.get)
@@ -177,13 +156,14 @@ def _closest(V, F, points, border=None):
 
 
 def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="correspondence",
-             lam=LAMBDA, p0=None, rotation=None, translation=None, max_iter=50,
+             lam=EQ13_LAMBDA, p0=None, rotation=None, translation=None, max_iter=50,
              max_distance=0.01, start_distance=0.03, rounds=8, progress=None):
     """Fit controls and rigid pose of ``model`` to a scan (metres). Returns a ScanFit.
 
     scan_vertices (S,3); scan_faces (G,3) (needed in ``nearest`` mode); kind: "blendshape"
     or "simulation"; p0 (K+6,) start (default neutral, in nearest mode with
     the jaw opening from ``search_jaw``); rotation/translation: start pose."""
+    t0 = time.perf_counter()
     S = np.asarray(scan_vertices, float)
     V = len(model.neutral)
     if mode not in ("correspondence", "nearest"):
@@ -195,13 +175,10 @@ def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="cor
                            "needs the model's topology; use --mode nearest for other meshes")
     if mode == "nearest" and scan_faces is None:
         raise InvfaceError("nearest mode needs the scan's triangles")
-    sm = model.surface_model(kind)
-    P = len(model.blendshape_names) + 6
-    z = np.r_[np.zeros(P) if p0 is None else np.asarray(p0, float),
-              np.zeros(3) if rotation is None else rotation,
-              np.zeros(3) if translation is None else translation]
-    lo, hi = control_bounds(model)
-    obj = _Objective(sm, lam, P)
+    sm, vec = model.surface_model(kind), FitVector.of(model)
+    z = vec.pack(p0, rotation, translation)
+    lo, hi = vec.bounds()
+    obj = _Objective(sm, lam, vec)
     history = []
 
     if mode == "correspondence":
@@ -217,8 +194,7 @@ def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="cor
         F, Fm = np.asarray(scan_faces), model.triangles
         scan_border, model_border = boundary_vertices(F, len(S)), boundary_vertices(Fm, V)
         if p0 is None:
-            z[len(model.blendshape_names)] = search_jaw(model, z, S, F, max_distance,
-                                                        model_border, scan_border)
+            z = vec.with_hinge(z, search_jaw(model, z, S, F, max_distance, model_border, scan_border))
         status, last = "rounds", None
         for rnd in range(rounds):
             gate = max(max_distance, start_distance * 0.5 ** rnd)
@@ -247,12 +223,14 @@ def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="cor
     else:
         q = _closest(S, np.asarray(scan_faces), xr)[0]
         err = np.linalg.norm(xr - q, axis=1)
+    p, rot, tr = vec.unpack(z)
     acts = {}
     if kind == "simulation":
-        a = sm.result_at(z[:P]).tracks.activations
+        a = sm.result_at(p).tracks.activations
         acts = {m.name: float(v) for m, v in zip(model.muscles, a)}
-    return ScanFit(p=z[:P], rotation=z[P:P + 3], translation=z[P + 3:], surface=xr, error=err,
-                   kind=kind, history=history, status=status, activations=acts)
+    return ScanFit(vector=vec, p=p, rotation=rot, translation=tr, surface=xr, error=err,
+                   kind=kind, history=history, status=status, activations=acts,
+                   seconds=time.perf_counter() - t0)
 
 
 def write_scan_fit(folder, model, fit, **extra):

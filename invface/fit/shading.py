@@ -32,14 +32,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ImageError, InvfaceError
+from ..errors import ImageError, InvfaceError, SimulationError
+from ..model.controls import FitVector
 from ..render.renderer import FaceRenderer
-from ..sim.quasistatic import SimulationError
 from .curves import CurveObjective
-from .scan import control_bounds, posed_jacobian
+from .lambdas import EQ16_LAMBDA_1, EQ16_LAMBDA_2
+from .pose import posed_jacobian, posed_surface
 
-LAMBDA_1 = 1e-4        # paper 000, Eq. 16: weight of the curve term (pixels^2)
-LAMBDA_2 = 1.0         # paper 000, Eq. 16: pull towards the curve solution w^
 LEVELS = 3
 
 
@@ -110,18 +109,18 @@ class ShadingFit:
 
 
 class ShadingObjective:
-    """Eq. 16 at z = (p, theta, t): ``__call__`` (cost, gradient (P+6,)) with one render and
-    one backward pass; ``normal_equations`` for the dogleg. window (x0, y0, width, height)
+    """Eq. 16 at z = (p, theta, t) (``FitVector``): ``__call__`` (cost, gradient) with one
+    render and one backward pass; ``normal_equations`` for the dogleg. window (x0, y0, width, height)
     px: render and compare only that part of the plate (``face_window``); outside it the
     render shows the plate itself, so the image term there is a constant."""
 
     def __init__(self, model, surface_model, camera, plate, gamma, albedo, p_hat, curves=None,
-                 lam1=LAMBDA_1, lam2=LAMBDA_2, mask=None, spp=8, silhouette_spp=0.5, seed=1, window=None,
+                 lam1=EQ16_LAMBDA_1, lam2=EQ16_LAMBDA_2, mask=None, spp=8, silhouette_spp=0.5, seed=1, window=None,
                  jacobian_spp=2):
         import drjit as dr
         self.dr = dr
         self.model, self.sm = model, surface_model
-        self.P = len(model.blendshape_names) + 6
+        self.vec = FitVector.of(model)
         plate = np.asarray(plate, np.float32)
         if plate.shape[:2] != (camera.height, camera.width):
             raise ImageError(f"plate is {plate.shape[1]}x{plate.shape[0]} px, the camera "
@@ -140,14 +139,15 @@ class ShadingObjective:
         self.jacobian_spp = int(jacobian_spp)
         self.curves = CurveObjective(model, surface_model, camera, curves, 0.0) if curves else None
         self.terms = {}
+        self.bridge = None             # bridge.SurfaceFunction of the gradient-only path
 
     def _prior_and_curves(self, z, xr, Jall=None):
         """Residual rows of the prior and curve terms at z (posed surface xr), scaled by the
-        square roots of their weights, the prior's P rows first: (rows (n,), their Jacobian
-        (n, P+6), or None without Jall)."""
-        P = self.P
-        rows = [np.sqrt(self.lam2) * (z[:P] - self.p_hat)]
-        jac = [np.sqrt(self.lam2) * np.eye(P, P + 6)] if Jall is not None else None
+        square roots of their weights, the prior's K+6 rows first: (rows (n,), their Jacobian
+        (n, z size), or None without Jall)."""
+        vec = self.vec
+        rows = [np.sqrt(self.lam2) * (z[vec.controls] - self.p_hat)]
+        jac = [np.sqrt(self.lam2) * np.eye(vec.P, vec.size)] if Jall is not None else None
         if self.curves is not None:
             if Jall is None:
                 rows += [np.sqrt(self.lam1) * np.linalg.norm(d, axis=1) for d in self.curves.residuals(xr).values()]
@@ -160,7 +160,7 @@ class ShadingObjective:
     def _cost(self, r_image, r_rest):
         """Eq. 16's value from the image rows and the prior and curve rows; ``terms`` keeps
         its three parts."""
-        P = self.P
+        P = self.vec.P
         self.terms = {"image": 0.5 * float(r_image @ r_image), "prior": 0.5 * float(r_rest[:P] @ r_rest[:P]),
                       "curves": 0.5 * float(r_rest[P:] @ r_rest[P:])}
         return sum(self.terms.values())
@@ -176,20 +176,46 @@ class ShadingObjective:
         return x, img, self.G(rgb * self.mask) - self.target
 
     def _backward(self, x, img, r, Jall):
-        """J^T r (P+6,) of the image rows: the adjoint G^T M r sent back through the render
-        to the positions x, then through d x_R / dz = Jall (P+6, V, 3)."""
-        mi = self.renderer.mi
-        adj = np.zeros(self.plate.shape[:2] + (4,), np.float32)
-        adj[..., :3] = self.G.adjoint(r) * self.mask
-        self.dr.backward(img * mi.TensorXf(adj))
+        """J^T r (z size,) of the image rows: the adjoint G^T M r sent back through the render
+        to the positions x, then through d x_R / dz = Jall (z size, V, 3)."""
+        self.dr.backward(img * self._image_adjoint(r))
         return np.einsum("kvi,vi->k", Jall, np.array(self.dr.grad(x), np.float64).reshape(-1, 3))
 
+    def _image_adjoint(self, r):
+        """TensorXf (h, w, 4): G^T M r, the image's adjoint for the residual r."""
+        adj = np.zeros(self.plate.shape[:2] + (4,), np.float32)
+        adj[..., :3] = self.G.adjoint(r) * self.mask
+        return self.renderer.mi.TensorXf(adj)
+
     def __call__(self, z):
-        """(cost, gradient (P+6,)): one render and one backward pass."""
-        xr, Jall = posed_jacobian(self.sm, z, self.P)
-        x, img, r = self._render(xr)
-        rr, Jr = self._prior_and_curves(z, xr, Jall)
-        return self._cost(r, rr), self._backward(x, img, r, Jall) + rr @ Jr
+        """(cost, gradient (z size,)) for gradient-only solvers: one render and one backward
+        pass through the Dr.Jit graph z -> x_R(z) (``bridge.PosedSurfaceFunction``) -> image,
+        so the surface model's derivative costs one adjoint product (``surface_vjp``: one
+        back-substitution for the simulation), not its Jacobian. The curve term's gradient
+        with respect to x_R joins the same backward pass. Same positions, render and cost as
+        ``normal_equations``."""
+        dr, mi, vec = self.dr, self.renderer.mi, self.vec
+        z = np.asarray(z, np.float64)
+        if self.bridge is None:
+            from ..bridge import PosedSurfaceFunction
+            self.bridge = PosedSurfaceFunction(self.sm, vec)
+        zd = mi.Float(z.astype(np.float32))
+        dr.enable_grad(zd)
+        xr = self.bridge(zd, exact=z)
+        xr_np = self.bridge.last
+        img = self.renderer.render(xr, self.gamma, self.albedo)
+        r = self.G(np.array(img, np.float32)[..., :3] * self.mask) - self.target
+        prior = np.sqrt(self.lam2) * (z[vec.controls] - self.p_hat)
+        rows, g_xr = [prior], np.zeros_like(xr_np)
+        if self.curves is not None:
+            rc, g_xr = self.curves.position_gradient(xr_np)
+            rows.append(np.sqrt(self.lam1) * rc)
+            g_xr = self.lam1 * g_xr
+        seed = dr.sum(img.array * self._image_adjoint(r).array) + dr.sum(xr * mi.Float(g_xr.astype(np.float32).ravel()))
+        dr.backward(seed)
+        g = np.array(dr.grad(zd), np.float64)
+        g[vec.controls] += np.sqrt(self.lam2) * prior
+        return self._cost(r, np.concatenate(rows)), g
 
     def normal_equations(self, z):
         """Gauss-Newton pieces of Eq. 16 at z, for the dogleg: a lazy ``NormalEquations``.
@@ -201,14 +227,13 @@ class ShadingObjective:
         render at ``jacobian_spp`` (~0.025 s each at 2 spp on a 460x540 window, silhouettes
         included), each sent through G M."""
         from .dogleg import NormalEquations
-        from .scan import posed_surface
-        _, xr = posed_surface(self.sm, z, self.P)
+        _, xr = posed_surface(self.sm, z, self.vec)
         x, img, r = self._render(xr)
         rr, _ = self._prior_and_curves(z, xr)
         cost = self._cost(r, rr)
 
         def derivatives():
-            xr2, Jall = posed_jacobian(self.sm, z, self.P)
+            xr2, Jall = posed_jacobian(self.sm, z, self.vec)
             # backward first: the renderer's adjoint pass reads the scene's current vertex
             # positions, which the Jacobian's render replaces
             g = self._backward(x, img, r, Jall)
@@ -219,7 +244,7 @@ class ShadingObjective:
         return NormalEquations(cost, derivatives=derivatives)
 
     def image_jacobian(self, xr, Jall, spp=None):
-        """J^T of the image residual r = G M (F - F*): (P+6, m) float32, one row per
+        """J^T of the image residual r = G M (F - F*): (z size, m) float32, one row per
         parameter, each a forward-mode pass through one render of the posed surface xr
         (V, 3) at ``spp`` (default ``jacobian_spp``) samples per pixel, seeded as the
         objective's renders, along d xr / dz_k = Jall[k] (V, 3)."""
@@ -271,23 +296,11 @@ def face_window(camera, xr, margin=0.15, align=1 << (LEVELS - 1)):
     return int(a[0]), int(a[1]), int(b[0] - a[0]), int(b[1] - a[1])
 
 
-def _scales(P):
-    """One unit of the optimiser's variables: weights 0.1, jaw rotations 0.01 rad, jaw
-    translations and the head translation 1 mm, head rotation 0.01 rad. The balance evens
-    out the curvature the solvers see; the size sets L-BFGS's first trial step and the
-    dogleg's first trust radius (a unit step of a weight by 1 or the head by 0.1 rad
-    overshot to costs 10-15x the start's)."""
-    s = np.full(P + 6, 0.1)
-    s[P - 6:P - 3], s[P - 3:P] = 0.01, 0.001
-    s[P:P + 3], s[P + 3:] = 0.01, 0.001
-    return s
-
-
 def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translation, kind="blendshape",
-                curves=None, lam1=LAMBDA_1, lam2=LAMBDA_2, mask=None, max_iter=25, p0=None,
+                curves=None, lam1=EQ16_LAMBDA_1, lam2=EQ16_LAMBDA_2, mask=None, max_iter=25, p0=None,
                 solver="dogleg", ftol=5e-3, restarts=2, progress=None, **render):
-    """Solve Eq. 16 from the curve solution (p_hat (P,), rotation (3,), translation (3,)), or
-    from p0 (P,) when given (p_hat stays the prior's centre).
+    """Solve Eq. 16 from the curve solution (p_hat (K+6,), rotation (3,), translation (3,)), or
+    from p0 (K+6,) when given (p_hat stays the prior's centre).
 
     plate: linear (H, W, 3) float, undistorted, the camera's size; gamma (9, 3), albedo (V, 3)
     from the calibration; curves: the plate curves of Eq. 15 or None; mask (H, W) bool or None:
@@ -299,15 +312,17 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     the cost by less than this fraction. ``render`` options go to ``ShadingObjective`` (spp,
     silhouette_spp, seed, jacobian_spp). Returns a ShadingFit."""
     from .dogleg import dogleg
-    from .scan import posed_surface
-    sm = model.surface_model(kind)
-    P = len(model.blendshape_names) + 6
-    z0 = np.r_[np.asarray(p_hat if p0 is None else p0, float), rotation, translation]
-    window = face_window(camera, posed_surface(sm, z0, P)[1])
+    sm, vec = model.surface_model(kind), FitVector.of(model)
+    z0 = vec.pack(p_hat if p0 is None else p0, rotation, translation)
+    window = face_window(camera, posed_surface(sm, z0, vec)[1])
     obj = ShadingObjective(model, sm, camera, plate, gamma, albedo, p_hat, curves, lam1, lam2, mask,
                            window=window, **render)
-    s = _scales(P)
-    lo, hi = control_bounds(model)
+    # one unit of the optimiser's variables (``FitVector.scales``): the balance evens out the
+    # curvature the solvers see; the size sets L-BFGS's first trial step and the dogleg's
+    # first trust radius (a unit step of a weight by 1 or the head by 0.1 rad overshot to
+    # costs 10-15x the start's)
+    s = vec.scales()
+    lo, hi = vec.bounds()
     history, t0 = [], time.perf_counter()
 
     def log(f, **extra):
@@ -335,7 +350,8 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
         z, status = _lbfgs(obj, z0, s, lo, hi, max_iter, restarts, log)
     else:
         raise InvfaceError(f"unknown solver '{solver}': use 'dogleg' or 'lbfgs'")
-    return ShadingFit(p=z[:P], rotation=z[P:P + 3], translation=z[P + 3:], history=history, status=status)
+    p, rot, tr = vec.unpack(z)
+    return ShadingFit(p=p, rotation=rot, translation=tr, history=history, status=status)
 
 
 class _ScaledEquations:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InvfaceError
+from ..model.controls import FitVector
 from ..model.rig import skin
 
 LIP_MUSCLE = "orbicularis_oris"
@@ -25,13 +26,14 @@ def tet_volumes(X, tets):
 
 def blendshape_volume(model, p):
     """Tet positions (N, 3) that the blendshape rig implies for parameters p (K+6,)."""
-    K = len(model.blendshape_names)
+    vec = FitVector.of(model)
     dX = model.track_displacements
-    if dX is None or np.shape(dX) != (K, len(model.rest_positions), 3):
+    if dX is None or np.shape(dX) != (vec.K, len(model.rest_positions), 3):
         from ..sim.poisson import track_displacements
         dX = track_displacements(model)
-    X = model.rest_positions + np.tensordot(np.asarray(p[:K], float), dX, axes=(0, 0))
-    return skin(X, model.volume_jaw_weights, model.jaw_matrix(p[K:K + 6]))
+    p = np.asarray(p, float)
+    X = model.rest_positions + np.tensordot(p[vec.weights], dX, axes=(0, 0))
+    return skin(X, model.volume_jaw_weights, model.jaw_matrix(p[vec.jaw]))
 
 
 def lip_volume_change(model, p, X=None):

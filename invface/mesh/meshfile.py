@@ -30,3 +30,16 @@ def read_mesh(path):
     if len(V) == 0 or len(F) == 0:
         raise MeshError(f"{path}: the file holds no triangle mesh")
     return V, F
+
+
+def write_mesh(path, vertices, faces):
+    """Write a triangle mesh (OBJ/PLY by suffix) through a temporary file and a rename."""
+    import os
+
+    import trimesh
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
+    trimesh.Trimesh(np.asarray(vertices, float), np.asarray(faces), process=False).export(tmp)
+    os.replace(tmp, path)
+    return path

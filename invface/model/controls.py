@@ -59,3 +59,152 @@ class Controls:
     def weight_vector(self, names):
         """Blendshape weights b (K,) in the order of ``names``."""
         return np.array([float(self.weights.get(n, 0.0)) for n in names])
+
+
+JAW_SIZE = 6          # jaw: 3 rotations (rad) + 3 translations (m) about the jaw pivot
+POSE_SIZE = 6         # rigid head pose: Euler XYZ (3, rad) + translation (3, m)
+
+
+class FitVector:
+    """The one owner of the fit vector's layout
+
+        z = (b (K,) | jaw (6,) | rotation (3,) | translation (3,)),   p = z[:K+6]
+
+    p (the first K+6 entries) is what a surface model takes (``FaceModel.surface_model``);
+    z adds the rigid head pose x_R = R(rotation) x + translation. Packs and unpacks, names
+    every entry, gives the fits' bounds and converts to and from the named dictionaries of
+    ``fit.json`` and ``Controls``. Nothing else slices z or p by position.
+    """
+
+    def __init__(self, blendshape_names):
+        from .rig import JAW_NAMES
+        self.blendshape_names = list(blendshape_names)
+        self.K = len(self.blendshape_names)
+        self.P = self.K + JAW_SIZE                      # controls p = (b, jaw)
+        self.size = self.P + POSE_SIZE                  # z = (p, rotation, translation)
+        self.names = self.blendshape_names + list(JAW_NAMES) + \
+            ["rotation_x", "rotation_y", "rotation_z", "translation_x", "translation_y", "translation_z"]
+        self.weights = slice(0, self.K)
+        self.jaw = slice(self.K, self.P)
+        self.controls = slice(0, self.P)
+        self.rotation = slice(self.P, self.P + 3)
+        self.translation = slice(self.P + 3, self.size)
+        self.pose = slice(self.P, self.size)
+
+    @classmethod
+    def of(cls, model):
+        """The layout of a FaceModel's fits."""
+        return cls(model.blendshape_names)
+
+    def __eq__(self, other):
+        return isinstance(other, FitVector) and other.blendshape_names == self.blendshape_names
+
+    def __repr__(self):
+        return f"FitVector(K={self.K}, size={self.size})"
+
+    # -- packing ----------------------------------------------------------------------
+    def pack(self, p=None, rotation=None, translation=None, weights=None, jaw=None):
+        """z (size,) from controls p (K+6,) (or b = ``weights`` (K,) and ``jaw`` (6,)) and the
+        pose; anything not given is zero."""
+        z = np.zeros(self.size)
+        if p is not None:
+            z[self.controls] = self._checked(p, self.P, "controls p")
+        if weights is not None:
+            z[self.weights] = self._checked(weights, self.K, "blendshape weights")
+        if jaw is not None:
+            z[self.jaw] = self._checked(jaw, JAW_SIZE, "jaw")
+        if rotation is not None:
+            z[self.rotation] = self._checked(rotation, 3, "rotation")
+        if translation is not None:
+            z[self.translation] = self._checked(translation, 3, "translation")
+        return z
+
+    def unpack(self, z):
+        """(p (K+6,), rotation (3,), translation (3,)) copies from z (size,)."""
+        z = self._checked(z, self.size, "fit vector z")
+        return z[self.controls].copy(), z[self.rotation].copy(), z[self.translation].copy()
+
+    def controls_vector(self, weights=None, jaw=None):
+        """p (K+6,) from b (K,) and jaw (6,) (zeros where not given)."""
+        return self.pack(weights=weights, jaw=jaw)[self.controls]
+
+    def with_controls(self, z, p):
+        """z with its controls replaced by p (K+6,)."""
+        z = np.array(z, float)
+        z[self.controls] = self._checked(p, self.P, "controls p")
+        return z
+
+    def with_pose(self, z, rotation, translation):
+        """z with its pose replaced."""
+        z = np.array(z, float)
+        z[self.rotation], z[self.translation] = rotation, translation
+        return z
+
+    def _checked(self, v, n, what):
+        v = np.asarray(v, float).reshape(-1)
+        if v.shape != (n,):
+            raise ControlsError(f"{what}: expected {n} values, got {v.size}")
+        return v
+
+    # -- bounds and scales ----------------------------------------------------------------
+    def bounds(self):
+        """Box (lower (size,), upper (size,)) the fits keep to: blendshape weights in [0, 1];
+        the jaw within its anatomical range (``rig.JAW_LOWER``/``JAW_UPPER``: opening
+        -0.1..0.6 rad about the hinge, +-0.15 rad sideways and twist, +-8 mm translation);
+        the rigid pose free."""
+        from .rig import JAW_LOWER, JAW_UPPER
+        lo, hi = np.full(self.size, -np.inf), np.full(self.size, np.inf)
+        lo[self.weights], hi[self.weights] = 0.0, 1.0
+        lo[self.jaw], hi[self.jaw] = JAW_LOWER, JAW_UPPER
+        return lo, hi
+
+    def scales(self):
+        """One unit of each entry for the optimisers' variables: weights 0.1, jaw rotations
+        0.01 rad, jaw translations 1 mm, head rotation 0.01 rad, head translation 1 mm."""
+        s = np.full(self.size, 0.1)
+        s[self.jaw] = [0.01, 0.01, 0.01, 0.001, 0.001, 0.001]
+        s[self.rotation], s[self.translation] = 0.01, 0.001
+        return s
+
+    def hinge(self, z_or_p):
+        """The jaw's opening about the hinge (rad): jaw[0]."""
+        return float(np.asarray(z_or_p, float)[self.K])
+
+    def with_hinge(self, z, angle):
+        """z (or p) with the jaw's hinge opening set to ``angle`` (rad)."""
+        z = np.array(z, float)
+        z[self.K] = angle
+        return z
+
+    # -- names ----------------------------------------------------------------------------
+    def weights_dict(self, z_or_p, digits=6):
+        """{blendshape name: weight} of z or p."""
+        b = np.asarray(z_or_p, float)[self.weights]
+        return dict(zip(self.blendshape_names, np.round(b, digits).tolist()))
+
+    def to_dict(self, z):
+        """The named dictionary of ``fit.json``: weights by name, jaw (6), rotation, translation."""
+        p, rot, tr = self.unpack(z)
+        return {"weights": self.weights_dict(p), "jaw": p[self.jaw].tolist(),
+                "rotation": rot.tolist(), "translation": tr.tolist()}
+
+    def from_dict(self, d, what="controls"):
+        """z from a dictionary as ``to_dict`` writes (or a Controls / a ground-truth file's dict);
+        unknown blendshape names are a ControlsError naming ``what``."""
+        try:
+            c = Controls.coerce({k: d[k] for k in ("weights", "jaw", "rotation", "translation") if k in d},
+                                self.blendshape_names)
+        except ControlsError as e:
+            raise ControlsError(f"{what}: {e}") from None
+        return self.from_controls(c)
+
+    def from_controls(self, c):
+        """z from a Controls value (or a dict ``Controls.coerce`` accepts)."""
+        c = Controls.coerce(c, self.blendshape_names)
+        return self.pack(weights=c.weight_vector(self.blendshape_names), jaw=c.jaw,
+                         rotation=c.rotation, translation=c.translation)
+
+    def to_controls(self, z):
+        """The Controls value of z."""
+        p, rot, tr = self.unpack(z)
+        return Controls(weights=self.weights_dict(p, digits=12), jaw=p[self.jaw], rotation=rot, translation=tr)

@@ -10,6 +10,33 @@ from .controls import Controls
 from .rig import BlendshapeRig, jaw_transform, skin
 
 
+# kind -> factory(model) of a surface model x(p); a factory may be given as "module:attribute",
+# imported on first use, so the model layer names no layer above it (the package's
+# __init__ registers the simulation).
+_SURFACE_MODELS = {"blendshape": BlendshapeRig}
+
+
+def register_surface_model(kind, factory):
+    """Make ``FaceModel.surface_model(kind)`` build ``factory(model)``: a callable or a
+    "package.module:Name" string imported on first use. The surface model has
+    parameter_names, surface(p) (V,3) m, surface_jacobian(p) (P,V,3) and surface_vjp(p, gx) (P,)."""
+    _SURFACE_MODELS[str(kind)] = factory
+
+
+def surface_kinds():
+    """The registered surface-model kinds."""
+    return list(_SURFACE_MODELS)
+
+
+def _surface_factory(kind):
+    f = _SURFACE_MODELS[kind]
+    if isinstance(f, str):
+        import importlib
+        module, _, name = f.partition(":")
+        f = _SURFACE_MODELS[kind] = getattr(importlib.import_module(module), name)
+    return f
+
+
 @dataclass
 class Muscle:
     """One muscle embedded in the flesh mesh.
@@ -113,14 +140,10 @@ class FaceModel:
     def surface_model(self, kind="blendshape"):
         """The model x(p) of ``kind`` (created once per FaceModel): parameter_names,
         surface(p), surface_jacobian(p) (P,V,3) and surface_vjp(p, gx) (P,)."""
-        if kind not in ("blendshape", "simulation"):
-            raise InvfaceError(f"unknown surface kind '{kind}': use 'blendshape' or 'simulation'")
+        if kind not in _SURFACE_MODELS:
+            raise InvfaceError(f"unknown surface kind '{kind}': use " + " or ".join(map(repr, _SURFACE_MODELS)))
         if kind not in self._surface_models:
-            if kind == "blendshape":
-                self._surface_models[kind] = BlendshapeRig(self)
-            else:
-                from ..sim.driven import DrivenSimulation
-                self._surface_models[kind] = DrivenSimulation(self)
+            self._surface_models[kind] = _surface_factory(kind)(self)
         return self._surface_models[kind]
 
     def embedding_matrix(self):

@@ -52,3 +52,18 @@ def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None, 
     plt.close(fig)
     os.replace(tmp, path)
     return path
+
+
+def write_pose_preview(model, x, path, size=400, spp=16):
+    """One PNG: the neutral (top) and the posed skin x (V, 3) m (bottom), front and 3/4,
+    written through a temporary file; returns the path."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    img = np.concatenate([np.concatenate(view_tiles(model, v, size, spp), 1) for v in (model.neutral, x)], 0)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp.png")
+    plt.imsave(tmp, img)
+    os.replace(tmp, path)
+    return path

@@ -25,12 +25,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.rig import jaw_transform_derivatives
+from ..model.controls import FitVector
 
 
 class Sensitivity:
     """Tangent and adjoint derivatives of a DrivenResult of a DrivenSimulation.
 
-    Arrays: P = K + 6 parameters, N tet vertices, V surface vertices, n free DOFs.
+    Arrays: P = K + 6 parameters (``model.controls.FitVector``), N tet vertices, V surface vertices, n free DOFs.
     """
 
     def __init__(self, driven, result):
@@ -41,14 +42,15 @@ class Sensitivity:
         _, jaw = driven.split(result.p)
         jm = model.jaw_matrix(jaw)
         dM = jaw_transform_derivatives(jaw, model.jaw_pivot, model.jaw_frame)
-        K = driven.n_blendshapes
-        self.P, self.K, self.N = K + 6, K, len(X)
+        self.vec = FitVector(model.blendshape_names)           # p = (b (K,), jaw (6,))
+        self.P, self.K, self.N = self.vec.P, self.vec.K, len(X)
+        jaw_rows = self.vec.jaw
         tr = driven.tracks
         self.da = tr.activation_jacobian(result.tracks, jm, dM)               # (M, P)
         self.dt = tr.target_derivatives(result.tracks, jm, dM)                # (P, n_tr, 3)
         self.dXc = np.zeros((self.P, self.N, 3))                                # constrained X^C(j)
         j = model.fixed_jaw
-        self.dXc[K:, j] = np.einsum("pab,nb->pna", dM[:, :3, :3], model.rest_positions[j]) + dM[:, None, :3, 3]
+        self.dXc[jaw_rows, j] = np.einsum("pab,nb->pna", dM[:, :3, :3], model.rest_positions[j]) + dM[:, None, :3, 3]
         self.active = sim.flesh.active_forces(X)                               # (Q,4,3)
         self.dcontact = result.sim.contacts.jaw_derivative(X, dM, self.N)      # (6,N,3)
         _, _, self.Ke = sim.flesh.evaluate(X, result.sim.activations, 2)       # exact element stiffness
@@ -75,9 +77,9 @@ class Sensitivity:
         R = np.einsum("mni,mp->pni", self._active_matrix(), self.da)
         tr = self.ds.tracks
         R[:, tr.vertices] -= tr.stiffness[None, :, None] * self.dt
-        for i in range(self.K, self.P):
+        for i in range(self.P)[self.vec.jaw]:
             R[i] += self._stiffness_times(self.dXc[i])
-        R[self.K:] += self.dcontact
+        R[self.vec.jaw] += self.dcontact
         return R
 
     def _rhs_transpose(self, mu):
@@ -89,8 +91,8 @@ class Sensitivity:
         tr = self.ds.tracks
         g -= np.einsum("pvi,vi->p", self.dt, tr.stiffness[:, None] * mu[tr.vertices])
         Hmu = self._stiffness_times(mu)
-        g[self.K:] += np.einsum("pni,ni->p", self.dXc[self.K:], Hmu)
-        g[self.K:] += np.einsum("pni,ni->p", self.dcontact, mu)
+        g[self.vec.jaw] += np.einsum("pni,ni->p", self.dXc[self.vec.jaw], Hmu)
+        g[self.vec.jaw] += np.einsum("pni,ni->p", self.dcontact, mu)
         return g
 
     # -- derivatives ------------------------------------------------------------------------

@@ -24,17 +24,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InvfaceError, MeshError
+from ..errors import InvfaceError, MeshError, SimulationError
 from ..mesh.tets import face_use, mean_edge_length
 from . import linsolve
 from .collisions import Collisions, ContactSet
 from .fem import Elements, FleshModel, Pattern
 from .materials import Material
 from .tracks import Tracks
-
-
-class SimulationError(InvfaceError):
-    """The quasistatic solve failed; the message carries the failure report."""
 
 
 @dataclass

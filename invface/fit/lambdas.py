@@ -1,0 +1,35 @@
+"""The weights of the paper's objectives (paper 000), one meaning per name, and their
+scaling with the face's size in a plate.
+
+Eq. 13 (scan):       |F* - x_R(w)|^2 + EQ13_LAMBDA |w|^2                       (m^2)
+Eq. 14 (calibration): |F* - F(gamma, c)|^2 + EQ14_LAMBDA |L c|^2               (pixels, vertices)
+Eq. 15 (curves):     |E_1(w^)|^2 + EQ15_LAMBDA_1 |w^|^2                         (px^2)
+Eq. 16 (shading):    |E_2|^2 + EQ16_LAMBDA_1 |E_1|^2 + EQ16_LAMBDA_2 |w - w^|^2 (linear light)
+
+The plate weights are the paper's for its plates. Eq. 15's residuals are pixels and Eq. 14's
+data term sums over the face's pixels, so both grow with the face's area in the image:
+``face_scale`` gives (d / SAMPLE_EYE_PX)^2 for a face d px between the outer eye corners,
+224 px on the sample plates, where the paper's values were checked.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+EQ13_LAMBDA = 1e-6          # scan fit: weight regulariser (m^2 per unit weight^2)
+EQ14_LAMBDA = 2500.0        # calibration: albedo smoothness
+EQ15_LAMBDA_1 = 3600.0      # curve fit: weight regulariser (px^2 per unit weight^2)
+EQ15_TRACK_LAMBDA = 1.0     # curve fit's pose pass (ours, not the paper's): a weak regulariser,
+                            # so the pose does not explain the expression
+EQ16_LAMBDA_1 = 1e-4        # shading: weight of the curve term E_1 (px^2)
+EQ16_LAMBDA_2 = 1.0         # shading: pull towards the curve solution w^
+
+SAMPLE_EYE_PX = 224.0       # outer eye-corner distance (px) on the sample plates (720x540, 30 deg)
+
+
+def face_scale(curves):
+    """(area factor (d / SAMPLE_EYE_PX)^2, d px) for plate curves {name: (n, 2) px} with the
+    eyes' upper lids (their first points are the outer corners); (1.0, nan) without them."""
+    if "eye_L_upper" not in curves or "eye_R_upper" not in curves:
+        return 1.0, float("nan")
+    d = float(np.linalg.norm(np.asarray(curves["eye_L_upper"])[0] - np.asarray(curves["eye_R_upper"])[0]))
+    return (d / SAMPLE_EYE_PX) ** 2, d

@@ -1,0 +1,351 @@
+"""The plate workflow as functions that take data and return results (paper 000, Eq. 14-16):
+find a plate's curves, pose the head from them, calibrate light and albedo, fit one frame
+with one or both model kinds, fit a sequence, score against a known truth.
+
+    curves, source = find_curves(model, plate)
+    pose = pose_from_curves(model, plate, curves)
+    calib = calibrate_plate(model, plate, pose.rotation, pose.translation, shape=pose.shape)
+    frame = fit_frame(model, plate, calib.calibration, curves, kinds=("blendshape", "simulation"))
+    frame.save("out/")                     # <kind>/fit.json, fit.npz and index.html
+
+Progress goes to a ``progress`` callback as dicts (the CLI turns them into bars): a fit's
+iteration log entries with "kind" and "stage" added, or {"message": text} for a step.
+Nothing here prints.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InvfaceError
+from ..fit.lambdas import EQ14_LAMBDA, EQ15_LAMBDA_1, face_scale
+
+PLATE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr")
+KINDS = ("blendshape", "simulation")
+DETECTOR = "landmark detector"
+
+
+def _say(progress, **event):
+    if progress is not None:
+        progress(event)
+
+
+def model_kinds(kinds):
+    """A tuple of model kinds from "blendshape", "simulation", "both" or a sequence of them."""
+    if isinstance(kinds, str):
+        kinds = KINDS if kinds == "both" else (kinds,)
+    kinds = tuple(kinds)
+    bad = [k for k in kinds if k not in KINDS]
+    if bad or not kinds:
+        raise InvfaceError(f"unknown model kind {bad or kinds}: use 'blendshape', 'simulation' or 'both'")
+    return kinds
+
+
+def as_plate(plate, camera=None):
+    """A ``render.plates.Plate`` from a Plate or an image path (camera: see ``load_plate``)."""
+    from ..render.plates import Plate, load_plate
+    return plate if isinstance(plate, Plate) else load_plate(plate, camera=camera)
+
+
+def plate_frames(source):
+    """Plate paths: [source] for an image file, its images in name order for a folder."""
+    src = Path(source)
+    if src.is_dir():
+        frames = sorted(f for f in src.iterdir() if f.suffix.lower() in PLATE_SUFFIXES)
+        if not frames:
+            raise InvfaceError(f"{src}: no plate images ({', '.join(PLATE_SUFFIXES)}) in this folder")
+        return frames
+    if src.is_file():
+        return [src]
+    raise InvfaceError(f"{src}: plate not found")
+
+
+def find_curves(model, plate, curves=None):
+    """The plate's curves and where they came from: ``curves`` ({name: (n, 2) px}, or a curve
+    file), else PLATE.curves.json beside the plate, else the landmark detector (whose face
+    oval then becomes the plate's mask when it has none). Returns ({name: (n, 2) px}, source)."""
+    from ..fit.curves import read_curves
+    from ..fit.landmarks import curves_from_landmarks, detect_landmarks, face_mask
+    from ..render.plates import linear_to_srgb
+    if isinstance(curves, dict):
+        return {k: np.asarray(v, float) for k, v in curves.items()}, "given"
+    path = Path(plate.path) if plate.path else None
+    if curves is None and path is not None:
+        side = path.with_name(path.stem + ".curves.json")
+        if side.is_file():
+            curves = side
+    if curves is not None:
+        return read_curves(curves, model, image_size=plate.camera.size), str(curves)
+    points = detect_landmarks(linear_to_srgb(plate.image), name=str(path or "plate"))
+    if plate.mask is None:
+        plate.mask = face_mask(points, *plate.image.shape[:2])
+    return curves_from_landmarks(points), DETECTOR
+
+
+def curve_lambda(curves, lam=None):
+    """lambda_1 of Eq. 15 for these plate curves: ``lam`` when given, else the paper's 3600
+    scaled by the face's area in pixels (``fit.lambdas.face_scale``)."""
+    return float(lam) if lam is not None else EQ15_LAMBDA_1 * face_scale(curves)[0]
+
+
+@dataclass
+class PoseEstimate:
+    """Pose and expression from a plate's curves (Eq. 15, blendshape rig): controls p (K+6,),
+    rotation (3,) rad, translation (3,) m, the unposed surface (V, 3) m they make, the curve
+    RMS in px, the curves' count and source, lambda_1 used, the fit's vector layout."""
+
+    p: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    shape: np.ndarray
+    rms_px: float
+    curves: int
+    source: str
+    lam: float
+    vector: object
+
+    def describe(self, top=4):
+        w = sorted(self.vector.weights_dict(self.p).items(), key=lambda kv: -kv[1])[:top]
+        return (f"pose from {self.curves} curves ({self.source}): {self.rms_px:.2f} px RMS, rotation "
+                f"{np.round(self.rotation, 3).tolist()} rad, translation {np.round(self.translation, 3).tolist()} m; "
+                "expression " + ", ".join(f"{k} {v:.2f}" for k, v in w))
+
+
+def pose_from_curves(model, plate, curves, lam=None, source="given"):
+    """Pose and expression of a plate of unknown pose (a photo) from its curves (Eq. 15 with
+    the blendshape rig; lambda_1 from ``curve_lambda``). Returns a PoseEstimate."""
+    from ..fit.curves import fit_curves
+    from ..model.controls import FitVector
+    lam = curve_lambda(curves, lam)
+    cf = fit_curves(model, plate.camera, curves, kind="blendshape", lam=lam)
+    return PoseEstimate(p=cf.p, rotation=cf.rotation, translation=cf.translation,
+                        shape=model.surface_model("blendshape").surface(cf.p), rms_px=cf.rms_px,
+                        curves=len(curves), source=source, lam=lam, vector=FitVector.of(model))
+
+
+@dataclass
+class PlateCalibration:
+    """Eq. 14 on one plate: the ``Calibration`` (gamma, albedo, pose), the unposed surface it
+    was solved on (V, 3) m, the plate, the model's triangles, seconds, and the pose estimate
+    when the pose came from the curves. ``save(path)`` writes the .npz and PATH_compare.png."""
+
+    calibration: object
+    shape: np.ndarray
+    plate: object
+    triangles: np.ndarray
+    seconds: float
+    pose: PoseEstimate | None = None
+
+    @property
+    def gamma(self):
+        return self.calibration.gamma
+
+    @property
+    def albedo(self):
+        return self.calibration.albedo
+
+    @property
+    def rms(self):
+        return self.calibration.history[-1]["rms"]
+
+    def save(self, path):
+        """Write the calibration (.npz) and PATH_compare.png (plate | render | 4x difference);
+        returns both paths."""
+        from ..fit.calibrate import comparison_image
+        from ..render.plates import write_image
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.calibration.save(path)
+        compare = write_image(path.with_name(path.stem + "_compare.png"),
+                              comparison_image(self.triangles, self.shape, self.calibration, self.plate.image))
+        return path, compare
+
+    def describe(self):
+        c = self.calibration
+        return (f"calibrated in {len(c.history)} iterations, {self.seconds:.1f} s: pixel RMS {self.rms:.4f} "
+                f"(linear), light DC {c.gamma[0].round(3).tolist()}")
+
+
+def calibrate_plate(model, plate, rotation=None, translation=None, shape=None, lam=EQ14_LAMBDA, max_iter=30,
+                    pose=None, progress=None):
+    """Eq. 14 on a loaded plate: SH light and per-vertex albedo with the head at the given
+    pose (rotation (3,) rad, translation (3,) m; default identity) and the unposed surface
+    ``shape`` (V, 3) m (default the neutral). progress: each iteration's log entry.
+    Returns a PlateCalibration."""
+    from ..fit.calibrate import calibrate
+    t0 = time.perf_counter()
+    shape = model.neutral if shape is None else np.asarray(shape, float)
+    cal = calibrate(model.triangles, shape, plate.image, plate.camera, rotation, translation, lam=lam,
+                    mask=plate.mask, max_iter=max_iter, progress=progress)
+    cal.plate = plate.path
+    return PlateCalibration(cal, shape, plate, np.asarray(model.triangles), time.perf_counter() - t0, pose)
+
+
+def auto_calibrate(model, plate, curves, source="given", lam_curves=None, lam=None, max_iter=30, progress=None):
+    """Calibrate a plate of unknown pose on itself: pose and expression from its curves
+    (Eq. 15), then Eq. 14 on that shape, lambda scaled with the face's size (``face_scale``)
+    unless given. Returns a PlateCalibration (its ``pose`` set)."""
+    pose = pose_from_curves(model, plate, curves, lam_curves, source=source)
+    _say(progress, message=pose.describe())
+    lam = EQ14_LAMBDA * face_scale(curves)[0] if lam is None else lam
+    return calibrate_plate(model, plate, pose.rotation, pose.translation, pose.shape, lam, max_iter, pose=pose,
+                           progress=progress)
+
+
+def score_against_truth(model, fit, truth_path):
+    """A fit's error against a synthetic plate's ground truth (``PLATE.truth.json``):
+    ({file, made_by, median_mm, max_mm, shape_median_mm, shape_max_mm}, posed per-vertex
+    error (V,) m). Posed: what the camera sees, including the monocular depth error; shape:
+    both surfaces unposed."""
+    from ..fit.plate import read_truth, vertex_errors
+    truth_surface, truth = read_truth(truth_path, model)
+    posed, shape = vertex_errors(model, fit, truth_surface, truth)
+    return ({"file": str(truth_path), "made_by": truth["kind"], "median_mm": float(np.median(posed) * 1000),
+             "max_mm": float(posed.max() * 1000), "shape_median_mm": float(np.median(shape) * 1000),
+             "shape_max_mm": float(shape.max() * 1000)}, posed)
+
+
+def truth_beside(plate):
+    """PLATE.truth.json beside the plate, or None."""
+    if not plate.path:
+        return None
+    path = Path(plate.path)
+    side = path.with_name(path.stem + ".truth.json")
+    return side if side.is_file() else None
+
+
+@dataclass
+class FrameFit:
+    """One plate fitted with one or more model kinds: ``fits`` {kind: fit.plate.PlateFit},
+    ``truth`` {kind: score} where the plate has a ground truth, the plate, its curves and
+    their source, and the options used. ``save(folder)`` writes what ``invface fit-plate``
+    writes: <kind>/fit.json, <kind>/fit.npz and the report index.html."""
+
+    plate: object
+    curves: dict
+    source: str
+    fits: dict = field(default_factory=dict)
+    truth: dict = field(default_factory=dict)
+    vertex_error: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+    title: str | None = None
+    written: set = field(default_factory=set, repr=False)
+
+    def __getitem__(self, kind):
+        return self.fits[kind]
+
+    @property
+    def name(self):
+        return Path(self.plate.path).name if self.plate.path else "plate"
+
+    def extra(self, kind):
+        """What fit.json records beside the fit's own summary."""
+        extra = {"curves_from": self.source, **self.options, "notes": list(self.notes)}
+        if self.source == DETECTOR:
+            extra["notes"].insert(0, "Curves from the automatic landmark detector (MediaPipe Face Landmarker); "
+                                     "its face oval masks the shading term.")
+        if kind in self.truth:
+            extra["truth"] = self.truth[kind]
+        return extra
+
+    def describe(self, kind):
+        """One line on the kind's fit."""
+        fit = self.fits[kind]
+        line = (f"{self.name} {kind}: {fit.seconds['total']:.1f} s, curves {fit.curve_rms_px:.2f} px RMS, "
+                f"image RMS {fit.image_rms:.4f}, {fit.nonzero_weights} non-zero weights, "
+                f"lip volume {100 * fit.lip_volume_change:+.2f} %")
+        if kind in self.truth:
+            t = self.truth[kind]
+            line += (f"; vertex error vs truth: median {t['median_mm']:.3f} mm posed, "
+                     f"{t['shape_median_mm']:.3f} mm shape")
+        return line
+
+    def save_kind(self, folder, model, kind):
+        """Write <folder>/<kind>/fit.json and fit.npz (each atomically)."""
+        from ..fit.plate import write_plate_fit
+        path = write_plate_fit(Path(folder) / kind, model, self.fits[kind], self.plate, self.curves,
+                               extra=self.extra(kind), vertex_error=self.vertex_error.get(kind))
+        self.written.add((str(Path(folder)), kind))
+        return path
+
+    def save(self, folder, model):
+        """Write every kind's files (those not written there yet) and the report; returns the
+        report page's path."""
+        from ..report.fit import write_report
+        for kind in self.fits:
+            if (str(Path(folder)), kind) not in self.written:
+                self.save_kind(folder, model, kind)
+        return write_report(folder, title=self.title or f"invface plate fit: {self.name}")
+
+
+def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), starts=None, iterations=25,
+              shading=True, lam_curves=None, solver="dogleg", notes=(), title=None, progress=None,
+              on_kind=None, source=None, camera=None):
+    """Fit one plate with each model kind (paper 000, Eq. 15 then 16). plate: a Plate or a path;
+    calibration: a Calibration or PlateCalibration of this model and camera set-up; curves:
+    see ``find_curves`` (source: where given curves came from, for the report); starts: {kind: PlateFit} of the previous frame (warm start);
+    lam_curves: lambda_1 of Eq. 15 (default: scaled with the face, ``curve_lambda``);
+    on_kind(frame, kind): called as each kind finishes (to write it at once); camera: for a
+    plate path (see ``render.plates.load_plate``). Returns a FrameFit."""
+    from ..fit.plate import fit_plate
+    plate = as_plate(plate, camera)
+    calibration = getattr(calibration, "calibration", calibration)
+    curves, found = find_curves(model, plate, curves)
+    source = source or found
+    lam = curve_lambda(curves, lam_curves)
+    frame = FrameFit(plate=plate, curves=curves, source=source, notes=list(notes), title=title,
+                     options={"curve_lambda": lam, "solver": solver})
+    truth = truth_beside(plate)
+    for kind in model_kinds(kinds):
+        def log(h, kind=kind):
+            _say(progress, **dict(h, kind=kind, frame=frame.name))
+        fit = fit_plate(model, plate, calibration, curves, kind=kind, start=(starts or {}).get(kind),
+                        shading=shading, max_iter_shading=iterations, lam_curves=lam, solver=solver, progress=log)
+        frame.fits[kind] = fit
+        if truth is not None:
+            frame.truth[kind], frame.vertex_error[kind] = score_against_truth(model, fit, truth)
+        if on_kind is not None:
+            on_kind(frame, kind)
+    return frame
+
+
+def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), curves=None, progress=None,
+                 on_kind=None, on_frame=None, **options):
+    """Fit plates in order, each warm-started from the previous frame's controls and pose
+    (``fit_frame`` options: camera, iterations, shading, lam_curves, solver, title, notes).
+    frames: plate paths, or a folder (``plate_frames``); curves: for a single plate only (a
+    sequence takes FRAME.curves.json beside each frame, or the detector); out: each kind of
+    each frame is written as it finishes, to out/ for one plate or out/<frame name>/ for
+    several, with its report page, and the sequence page out/index.html; on_kind(frame,
+    kind) and on_frame(frame, folder) are called as they finish. Returns [FrameFit]."""
+    frames = plate_frames(frames) if isinstance(frames, (str, Path)) else list(frames)
+    if curves is not None and len(frames) > 1:
+        raise InvfaceError("one curves file names one plate; in a sequence put FRAME.curves.json beside each "
+                           "frame (or let the detector find each frame's curves)")
+    results, starts = [], None
+    for i, path in enumerate(frames):
+        folder = None if out is None else Path(out) / Path(path).stem if len(frames) > 1 else Path(out)
+        if len(frames) > 1:
+            _say(progress, message=f"frame {i + 1}/{len(frames)}: {Path(path).name}")
+
+        def finished(frame, kind, folder=folder):
+            if folder is not None:
+                frame.save_kind(folder, model, kind)
+            if on_kind is not None:
+                on_kind(frame, kind)
+        frame = fit_frame(model, path, calibration, curves, kinds=kinds, starts=starts, progress=progress,
+                          on_kind=finished, **options)
+        if folder is not None:
+            frame.save(folder, model)
+        if on_frame is not None:
+            on_frame(frame, folder)
+        starts = frame.fits
+        results.append(frame)
+    if out is not None and len(frames) > 1:
+        from ..report.sequence import write_sequence_report
+        write_sequence_report(out)
+    return results

@@ -1,0 +1,163 @@
+"""The session layer (invface.pipeline), the fit vector's layout, the surface-model registry
+and the gradient-only path's single adjoint product."""
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import invface
+from conftest import SMALL_RESOLUTION
+from invface.errors import ControlsError, InvfaceError
+from invface.model import FitVector
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_fit_vector_packs_names_bounds_and_dicts(small_expressive_model):
+    m = small_expressive_model
+    vec = FitVector.of(m)
+    K = len(m.blendshape_names)
+    assert (vec.K, vec.P, vec.size) == (K, K + 6, K + 12) and len(vec.names) == vec.size
+    p = np.linspace(0, 1, vec.P)
+    z = vec.pack(p, [0.1, 0.2, 0.3], [0.01, 0.02, 0.03])
+    q, rot, tr = vec.unpack(z)
+    assert np.array_equal(q, p) and np.array_equal(rot, [0.1, 0.2, 0.3]) and np.array_equal(tr, [0.01, 0.02, 0.03])
+    assert vec.names[vec.K] == "jaw_rx" and vec.names[-1] == "translation_z"
+    lo, hi = vec.bounds()
+    assert np.all(lo[vec.weights] == 0) and np.all(hi[vec.weights] == 1)
+    assert hi[vec.jaw][0] == pytest.approx(0.6) and np.all(np.isinf(lo[vec.pose]))
+    d = vec.to_dict(z)
+    assert set(d) == {"weights", "jaw", "rotation", "translation"} and len(d["weights"]) == K
+    np.testing.assert_allclose(vec.from_dict(d), z, atol=1e-6)                 # to_dict rounds to 1e-6
+    c = vec.to_controls(z)
+    np.testing.assert_allclose(vec.from_controls(c), z, atol=1e-12)
+    assert vec.hinge(vec.with_hinge(z, 0.3)) == 0.3
+    with pytest.raises(ControlsError, match="expected"):
+        vec.unpack(z[:-1])
+    with pytest.raises(ControlsError, match="truth.json.*unknown blendshape 'smile'"):
+        vec.from_dict({"weights": {"smile": 1.0}}, what="truth.json")
+
+
+def test_surface_models_come_from_a_registry(small_model):
+    from invface.model import register_surface_model
+    m = small_model
+
+    class Doubled:
+        def __init__(self, model):
+            self.rig = model.surface_model("blendshape")
+
+        def surface(self, p):
+            return 2 * self.rig.surface(p)
+    register_surface_model("doubled", Doubled)
+    try:
+        np.testing.assert_allclose(m.surface(kind="doubled"), 2 * m.neutral)
+        with pytest.raises(InvfaceError, match="'blendshape' or 'simulation' or 'doubled'"):
+            m.surface_model("muscles")
+    finally:
+        from invface.model import facemodel
+        facemodel._SURFACE_MODELS.pop("doubled")
+        m._surface_models.pop("doubled", None)
+
+
+def test_layers_import_downwards_only():
+    """The model layer and the dogleg do not import the simulation; nothing below the CLI
+    imports it, and benches and tests use the library (DESIGN.md, import direction)."""
+    code = ("import sys, invface, invface.model, invface.fit.dogleg, invface.fit.pose; "
+            "print([m for m in sys.modules if m.startswith('invface.sim') or m.startswith('invface.cli')])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
+    users = [str(f.relative_to(ROOT)) for folder in ("bench", "tests", "invface") for f in (ROOT / folder).rglob("*.py")
+             if re.search(r"^\s*(from invface\.cli import|import invface\.cli|from invface import cli|from \.+cli import)",
+                           f.read_text(), re.M)]
+    assert users == ["tests/test_cli.py"], users
+
+
+def _sim_scene(m):
+    from invface.fit.samples import sample_camera
+    from invface.render.synthetic import render_plate, skin_albedo, studio_light
+    cam = sample_camera(180, 135)
+    vec = FitVector.of(m)
+    z = vec.from_dict({"weights": {"lipCornerPull_L": 0.5, "browInnerUp_L": 0.3}, "jaw": [0.03, 0, 0, 0, 0, 0],
+                       "rotation": [0.02, -0.05, 0.0], "translation": [0.001, 0.0, 0.002]})
+    g, a = studio_light(), skin_albedo(m)
+    p, rot, tr = vec.unpack(z)
+    plate, _ = render_plate(m, m.surface(vec.to_controls(z)), cam, g, a, rot, tr, spp=8, noise=0.0)
+    return cam, vec, z, g, a, plate
+
+
+def test_gradient_only_path_takes_one_adjoint_product(small_expressive_model):
+    """ShadingObjective's (cost, gradient) for L-BFGS: through the Dr.Jit bridge, the
+    simulation's surface_vjp once per evaluation and never its Jacobian; the gradient is the
+    dogleg path's J^T r of the same render (curves and prior included)."""
+    from invface.fit.curves import PLATE_CURVES, projection_jacobian
+    from invface.fit.pose import posed_surface
+    from invface.fit.shading import ShadingObjective
+    m = small_expressive_model
+    cam, vec, z, g, a, plate = _sim_scene(m)
+    sm = m.surface_model("simulation")
+    xr = posed_surface(sm, z, vec)[1]
+    curves = {c: projection_jacobian(cam, xr[m.curves[c]])[0] + 0.7 for c in PLATE_CURVES}
+    obj = ShadingObjective(m, sm, cam, plate, g, a, vec.unpack(z)[0] * 0.9, curves, lam1=1e-3, spp=8)
+    z1 = z.copy()
+    z1[vec.weights] *= 0.8
+    calls = {"vjp": 0, "jacobian": 0}
+    vjp, jac = sm.surface_vjp, sm.surface_jacobian
+
+    def count_vjp(*args):
+        calls["vjp"] += 1
+        return vjp(*args)
+
+    def count_jac(*args):
+        calls["jacobian"] += 1
+        return jac(*args)
+    sm.surface_vjp, sm.surface_jacobian = count_vjp, count_jac
+    try:
+        f, grad = obj(z1)
+        assert calls == {"vjp": 1, "jacobian": 0}
+        ne = obj.normal_equations(z1)
+        assert ne.cost == pytest.approx(f, rel=1e-5)
+        np.testing.assert_allclose(grad, ne.gradient, rtol=2e-3, atol=2e-3 * np.abs(ne.gradient).max())
+    finally:
+        sm.surface_vjp, sm.surface_jacobian = vjp, jac
+    assert obj.terms["curves"] > 0 and obj.terms["prior"] > 0
+
+
+def test_readme_from_python_script_runs(tmp_path):
+    """The README's "From Python" script, as written (on the small head, output in tmp):
+    calibration and both kinds' fits of a sample plate, their files, and named results."""
+    text = (ROOT / "README.md").read_text()
+    code = re.search(r"## From Python.*?```python\n(.*?)```", text, re.S).group(1)
+    assert len(code.strip().splitlines()) <= 12
+    code = code.replace("invface.build_model()", f"invface.build_model(resolution={SMALL_RESOLUTION})")
+    code = code.replace('"out/', f'"{tmp_path}/').replace('"plates/', f'"{ROOT}/plates/')
+    scope = {}
+    exec(compile(code, "README.md", "exec"), scope)
+    fit, calib = scope["fit"], scope["calib"]
+    for f in ("calib.npz", "calib_compare.png", "smile/index.html", "smile/blendshape/fit.json",
+              "smile/simulation/fit.npz"):
+        assert (tmp_path / f).is_file(), f
+    sim = fit["simulation"]
+    assert calib.pose is not None and calib.rms < 0.05, calib.rms
+    # a smile (the plate was made by the default head: the small head's shapes differ, so its
+    # weights do: lipCornerPull 0.26 / 0.31 measured, truth 0.7 / 0.6)
+    smile = (sim.weights["lipCornerPull_L"], sim.weights["lipCornerPull_R"], sim.activations["zygomaticus_major_L"])
+    assert smile[0] + smile[1] > 0.3 and smile[2] > 0.02, smile
+    import json
+    saved = json.loads((tmp_path / "smile/simulation/fit.json").read_text())
+    assert saved["weights"] == sim.weights and saved["truth"]["median_mm"] == fit.truth["simulation"]["median_mm"]
+    assert set(fit.truth) == {"blendshape", "simulation"} and fit.truth["simulation"]["shape_median_mm"] < 1.0, fit.truth
+
+
+def test_pipeline_refuses_unknown_kinds_and_one_curves_file_for_a_sequence(small_model, tmp_path):
+    from invface.pipeline import fit_sequence, model_kinds
+    assert model_kinds("both") == ("blendshape", "simulation")
+    with pytest.raises(InvfaceError, match="unknown model kind"):
+        model_kinds("muscles")
+    with pytest.raises(InvfaceError, match="one curves file names one plate"):
+        fit_sequence(small_model, [ROOT / "plates/neutral.png"] * 2, None, curves="c.json")
+    assert set(invface.__all__) >= {"build_model", "fit_scan", "fit_plate", "calibrate"}
+    with pytest.raises(AttributeError):
+        invface.fit_everything
