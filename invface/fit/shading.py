@@ -21,8 +21,9 @@ factorisation), and H = J^T J from the image Jacobian's columns, one forward-mod
 parameter through a second, cheaper render (``jacobian_spp`` samples per pixel), each sent
 through G M. Both are computed only for accepted steps; a rejected trial costs one render.
 Only the face's window of the plate is rendered (``face_window``). The gradient-only path
-(L-BFGS-B on the adjoint gradient, one render and one backward pass per evaluation) is for
-parameter counts where P+6 forward passes are too many. The renderer keeps one sample seed,
+(L-BFGS-B on the adjoint gradient, one render and one backward pass per evaluation, through
+``bridge.PosedSurfaceFunction``: one adjoint product of the surface model) is for parameter
+counts where K+12 forward passes are too many. The renderer keeps one sample seed,
 so the objective is a deterministic function of z.
 """
 from __future__ import annotations
@@ -139,7 +140,7 @@ class ShadingObjective:
         self.jacobian_spp = int(jacobian_spp)
         self.curves = CurveObjective(model, surface_model, camera, curves, 0.0) if curves else None
         self.terms = {}
-        self.bridge = None             # bridge.SurfaceFunction of the gradient-only path
+        self.bridge = None             # bridge.PosedSurfaceFunction of the gradient-only path
 
     def _prior_and_curves(self, z, xr, Jall=None):
         """Residual rows of the prior and curve terms at z (posed surface xr), scaled by the
@@ -211,8 +212,8 @@ class ShadingObjective:
             rc, g_xr = self.curves.position_gradient(xr_np)
             rows.append(np.sqrt(self.lam1) * rc)
             g_xr = self.lam1 * g_xr
-        seed = dr.sum(img.array * self._image_adjoint(r).array) + dr.sum(xr * mi.Float(g_xr.astype(np.float32).ravel()))
-        dr.backward(seed)
+        dr.backward(dr.sum(img.array * self._image_adjoint(r).array)
+                    + dr.sum(xr * mi.Float(g_xr.astype(np.float32).ravel())))
         g = np.array(dr.grad(zd), np.float64)
         g[vec.controls] += np.sqrt(self.lam2) * prior
         return self._cost(r, np.concatenate(rows)), g
@@ -307,7 +308,7 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     the plate pixels of the data term. solver: "dogleg" (the paper's: Gauss-Newton on the
     image Jacobian from forward-mode passes, ``ShadingObjective.normal_equations``) or
     "lbfgs" (the gradient-only path: L-BFGS-B on adjoint gradients, one render and one
-    backward pass per evaluation, for parameter counts where P+6 forward passes are too
+    backward pass per evaluation, for parameter counts where K+12 forward passes are too
     many); max_iter: iterations of either; ftol: the dogleg stops after a step that lowers
     the cost by less than this fraction. ``render`` options go to ``ShadingObjective`` (spp,
     silhouette_spp, seed, jacobian_spp). Returns a ShadingFit."""
