@@ -23,12 +23,9 @@ def _cam(w=160, h=120):
 
 
 def _truth(model, kind="blendshape"):
-    K = len(model.blendshape_names)
-    p = np.zeros(K + 6)
-    p[model.blendshape_names.index("lipCornerPull_L")] = 0.7
-    p[model.blendshape_names.index("lipCornerPull_R")] = 0.6
-    p[model.blendshape_names.index("browInnerUp_L")] = 0.5
-    return p, posed_surface(model.surface_model(kind), np.r_[p, ROT, TR], FitVector.of(model))
+    p = model.parameters({"lipCornerPull_L": 0.7, "lipCornerPull_R": 0.6, "browInnerUp_L": 0.5})
+    vec = FitVector.of(model)
+    return p, posed_surface(model.surface_model(kind), vec.pack(p, ROT, TR), vec)
 
 
 def test_pyramid_is_opencv_pyrdown_and_its_adjoint_is_exact():
@@ -66,7 +63,7 @@ def test_shading_gradient_matches_finite_differences(small_expressive_model):
     # two weights (interior shading dominates: tight) and the sideways shift (the silhouette
     # estimator dominates: measured 7 %; finite differences of the sampled edges are noisy)
     for idx, h, rel in ((names.index("lipCornerPull_L"), 0.02, 0.05), (names.index("browInnerUp_L"), 0.05, 0.05),
-                        (P + 3, 2e-4, 0.2)):
+                        (FitVector.of(m).names.index("translation_x"), 2e-4, 0.2)):
         d = np.zeros_like(z)
         d[idx] = h
         fd = (obj(z + d)[0] - obj(z - d)[0]) / (2 * h)
@@ -88,7 +85,7 @@ def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_m
     xr, Jall = posed_jacobian(sm, z, FitVector.of(m))
     r = obj._render(xr)[2]
     C = obj.image_jacobian(xr, Jall)
-    assert C.shape == (P + 6, len(r))
+    assert C.shape == (FitVector.of(m).size, len(r))
     np.testing.assert_allclose(C.astype(np.float64) @ r, grad, rtol=1e-4, atol=1e-6 * np.abs(grad).max())
     # the dogleg's pieces: the same gradient, and H = C C^T (no prior, no curves here)
     ne = obj.normal_equations(z)
@@ -96,7 +93,8 @@ def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_m
     np.testing.assert_allclose(ne.hessian, C.astype(np.float64) @ C.T.astype(np.float64), rtol=1e-4,
                                atol=1e-7 * np.abs(ne.hessian).max())
     names = m.blendshape_names
-    for idx, h in ((names.index("lipCornerPull_L"), 0.02), (names.index("browInnerUp_L"), 0.05), (P + 3, 2e-4)):
+    for idx, h in ((names.index("lipCornerPull_L"), 0.02), (names.index("browInnerUp_L"), 0.05),
+                   (FitVector.of(m).names.index("translation_x"), 2e-4)):
         d = np.zeros_like(z)
         d[idx] = h
         vec = FitVector.of(m)
@@ -213,10 +211,8 @@ def test_report_without_fits_is_a_clear_error(tmp_path):
 def test_lip_volume_of_blendshapes_changes_and_rest_is_zero(small_expressive_model):
     from invface.measure.volume import lip_volume_change
     m = small_expressive_model
-    K = len(m.blendshape_names)
-    assert lip_volume_change(m, np.zeros(K + 6)) == pytest.approx(0.0, abs=1e-12)
-    p = np.zeros(K + 6)
-    p[m.blendshape_names.index("lipPucker")] = 1.0
+    assert lip_volume_change(m, m.parameters()) == pytest.approx(0.0, abs=1e-12)
+    p = m.parameters({"lipPucker": 1.0})
     assert abs(lip_volume_change(m, p)) > 0.01             # blendshapes do not keep the lips' volume
 
 

@@ -105,13 +105,12 @@ def test_nearest_mode_jaw_search_finds_the_opening(small_expressive_model, openi
     in another topology (the rig's jaw opened by ``opening`` rad, subdivided) within 0.05 rad."""
     import trimesh
     from invface.fit.scan import search_jaw
+    from invface.model import FitVector
     from invface.mesh.triangles import boundary_vertices
     m = small_expressive_model
-    K = len(m.blendshape_names)
-    p = np.zeros(K + 6)
-    p[K] = opening
+    p = m.parameters({"jaw": [opening, 0, 0, 0, 0, 0]})
     V, F = trimesh.remesh.subdivide(m.surface_model("blendshape").surface(p), m.triangles)
-    found = search_jaw(m, np.zeros(K + 12), V, F, 0.01, boundary_vertices(m.triangles, len(m.neutral)),
+    found = search_jaw(m, FitVector.of(m).pack(), V, F, 0.01, boundary_vertices(m.triangles, len(m.neutral)),
                        boundary_vertices(F, len(V)))
     assert abs(found - opening) <= 0.05 + 1e-9, found
 

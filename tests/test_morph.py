@@ -140,8 +140,7 @@ def test_real_scan_ict_neutral(small_model, tmp_path):
     model, res = build_model(ICT / "neutral.obj", blendshapes=tmp_path, template=small_model, expressions="none")
     jaw = np.array(model.meta["blendshape_jaw"]["jawOpen"])
     assert 0.25 < jaw[0] < 0.45 and np.abs(jaw[1:]).max() < 0.02, jaw          # 19 degrees
-    p = model.parameters({"jawOpen": 1.0})
-    p[-6:] = jaw
+    p = model.parameters({"weights": {"jawOpen": 1.0}, "jaw": jaw})
     target = model.surface_model("blendshape").surface(p)                       # the imported shape
     err = np.linalg.norm(model.surface_model("simulation").surface(p) - target, axis=1)
     moved = np.linalg.norm(target - model.neutral, axis=1) > 0.001
@@ -334,9 +333,7 @@ def test_imported_jaw_shape_drives_the_simulation(small_expressive_model, tmp_pa
     files.mkdir()
     imported = {}
     for name in ("jawOpen", "lipCornerPull_L"):        # the template's, jaw rotation included
-        p = np.zeros(len(tpl.blendshape_names) + 6)
-        p[tpl.blendshape_names.index(name)] = 1
-        p[-6:] = tpl.meta["blendshape_jaw"][name]
+        p = tpl.parameters({"weights": {name: 1.0}, "jaw": tpl.meta["blendshape_jaw"][name]})
         imported[name] = X + rig.surface(p) - tpl.neutral
         write_mesh(files / f"{name}.obj", (imported[name] @ R.T + t) / 0.001, tpl.triangles)
     model, res = build_model(tmp_path / "neutral.obj", blendshapes=files, template=tpl)
@@ -348,8 +345,7 @@ def test_imported_jaw_shape_drives_the_simulation(small_expressive_model, tmp_pa
     A = model.scan_transform
     for name, shape in imported.items():
         truth = ((shape @ R.T + t) / 0.001) @ A[:3, :3].T + A[:3, 3]      # the file, model frame
-        p = model.parameters({name: 1.0})
-        p[-6:] = model.meta["blendshape_jaw"][name]
+        p = model.parameters({"weights": {name: 1.0}, "jaw": model.meta["blendshape_jaw"][name]})
         rig_x = model.surface_model("blendshape").surface(p)
         assert closest_points(rig_x[on], truth, tpl.triangles)[2].max() < 5e-5, name   # 2 mm with the lips merged
         sim_x = model.surface_model("simulation").surface(p)
