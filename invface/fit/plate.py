@@ -32,12 +32,12 @@ from ..model.controls import FitVector
 from .curves import CurveObjective, fit_curves, projection_jacobian, rms_px
 from .lambdas import EQ15_LAMBDA_1
 from .pose import posed_surface, unpose_points
-from .results import write_fit_files
+from .results import NamedControls, write_fit_files
 from .shading import fit_shading
 
 
 @dataclass
-class PlateFit:
+class PlateFit(NamedControls):
     """Result of one plate: parameters p (K+6,), pose, posed surface (V, 3) m, the render
     (H, W, 3) linear, per-curve pixel residuals, the log of both stages, seconds per stage."""
 
@@ -59,21 +59,6 @@ class PlateFit:
     @property
     def curve_rms_px(self):
         return rms_px(self.residual_px)
-
-    @property
-    def z(self):
-        """The fit vector (``FitVector``): controls and pose."""
-        return self.vector.pack(self.p, self.rotation, self.translation)
-
-    @property
-    def weights(self):
-        """{blendshape name: weight}."""
-        return self.vector.weights_dict(self.p)
-
-    @property
-    def jaw(self):
-        """(6,) jaw parameters."""
-        return self.p[self.vector.jaw].copy()
 
     @property
     def nonzero_weights(self):

@@ -8,6 +8,26 @@ from pathlib import Path
 import numpy as np
 
 
+class NamedControls:
+    """The named views of a fit's result with ``vector`` (FitVector), controls ``p``,
+    ``rotation`` and ``translation``: the fit vector z, weights by name, the jaw."""
+
+    @property
+    def z(self):
+        """The fit vector (``FitVector``): controls and pose."""
+        return self.vector.pack(self.p, self.rotation, self.translation)
+
+    @property
+    def weights(self):
+        """{blendshape name: weight}."""
+        return self.vector.weights_dict(self.p)
+
+    @property
+    def jaw(self):
+        """(6,) jaw parameters."""
+        return self.p[self.vector.jaw].copy()
+
+
 def json_safe(o):
     """o with numpy scalars made Python numbers and non-finite floats None (valid JSON)."""
     if isinstance(o, dict):

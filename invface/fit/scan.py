@@ -39,11 +39,11 @@ from ..model.rig import JAW_LOWER, JAW_UPPER
 from .dogleg import dogleg
 from .lambdas import EQ13_LAMBDA
 from .pose import posed_jacobian, posed_surface, regulariser
-from .results import write_fit_files
+from .results import NamedControls, write_fit_files
 
 
 @dataclass
-class ScanFit:
+class ScanFit(NamedControls):
     """Result: parameters p = (b, jaw), rigid pose, surfaces, per-vertex error, the log."""
 
     vector: FitVector
@@ -57,20 +57,6 @@ class ScanFit:
     status: str = ""
     activations: dict = field(default_factory=dict)   # muscle -> activation (simulation fits)
     seconds: float = 0.0
-
-    @property
-    def z(self):
-        return self.vector.pack(self.p, self.rotation, self.translation)
-
-    @property
-    def weights(self):
-        """{blendshape name: weight}."""
-        return self.vector.weights_dict(self.p)
-
-    @property
-    def jaw(self):
-        """(6,) jaw parameters."""
-        return self.p[self.vector.jaw].copy()
 
     def summary(self, model=None):
         """JSON-ready dict: weights by name, jaw, pose, activations, error statistics in mm."""
