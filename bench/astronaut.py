@@ -75,7 +75,7 @@ def main():
         frame = pipeline.fit_frame(model, plate, calib, curves, kinds=a.kinds.split(","), iterations=a.iterations,
                                    source=source, notes=NOTES,
                                    title="invface: the astronaut photo (a real face, another identity)")
-        print(f"report: {frame.save(out, model)}")
+        print(f"report: {frame.save(out)}")
     except InvfaceError as e:
         sys.exit(f"error: {e}")
     for kind, fit in frame.fits.items():

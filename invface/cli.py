@@ -231,13 +231,23 @@ def _fit_frames(model, frames, cal, kinds, out, options, curves=None):
     def kind_done(frame, kind):
         bars.close()
         print(frame.describe(kind), flush=True)
+    def frame_done(frame, folder):
+        bars.close()
+        for kind, why in frame.failed.items():
+            print(f"{frame.name} {kind}: did not finish: {why}", flush=True)
+        if frame.fits:
+            print(f"report: {folder / 'index.html'}")
     try:
-        fit_sequence(model, frames, cal, out, kinds, curves, progress=bars, on_kind=kind_done,
-                     on_frame=lambda frame, folder: print(f"report: {folder / 'index.html'}"), **options)
+        results = fit_sequence(model, frames, cal, out, kinds, curves, progress=bars, on_kind=kind_done,
+                               on_frame=frame_done, **options)
     finally:
         bars.close()
     if len(frames) > 1:
         print(f"sequence report: {out / 'index.html'}")
+    empty = [r for r in results if not r.fits]
+    if empty:      # exit non-zero only when a plate has no kind at all
+        raise InvfaceError(f"{empty[0].name}: no model kind finished: "
+                           + "; ".join(f"{k}: {why}" for k, why in empty[0].failed.items()))
 
 
 def cmd_fit_plate(args):

@@ -200,3 +200,27 @@ def test_cli_rejects_a_sphere(tmp_path, capsys):
     assert "face" in capsys.readouterr().err
     assert not (tmp_path / "x.npz").exists()
     assert isinstance(MeshError("x"), InvfaceError)
+
+
+def test_fit_plate_writes_the_kinds_that_finish_and_exits_0(small_expressive_model, tmp_path, monkeypatch, capsys):
+    """A simulation that cannot reach an equilibrium leaves the blendshape fit written and
+    the exit status 0; when no kind finishes, status 2 and one line naming why."""
+    from invface.cli import main
+    from invface.fit.calibrate import Calibration
+    from invface.fit.samples import write_sample_plates
+    from invface.render.synthetic import skin_albedo, studio_light
+    from test_pipeline import _failing_simulation
+    m = small_expressive_model
+    path, = write_sample_plates(m, tmp_path / "plates", names=["smile_blendshape"], size=(240, 180))
+    Calibration(gamma=studio_light(), albedo=skin_albedo(m)).save(tmp_path / "calib.npz")
+    args = [str(path), "--calib", str(tmp_path / "calib.npz"), "--resolution", str(SMALL_RESOLUTION),
+            "--model-kind", "both", "--no-shading"]
+    _failing_simulation(monkeypatch)
+    assert main(["fit-plate", *args, "-o", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "smile_blendshape.png simulation: did not finish: Newton did NOT converge" in out
+    assert (tmp_path / "out/blendshape/fit.json").is_file() and (tmp_path / "out/index.html").is_file()
+    _failing_simulation(monkeypatch, kinds=("blendshape", "simulation"))
+    assert main(["fit-plate", *args, "-o", str(tmp_path / "none")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no model kind finished: blendshape: Newton did NOT converge" in err[0], err

@@ -161,3 +161,42 @@ def test_pipeline_refuses_unknown_kinds_and_one_curves_file_for_a_sequence(small
     assert set(invface.__all__) >= {"build_model", "fit_scan", "fit_plate", "calibrate"}
     with pytest.raises(AttributeError):
         invface.fit_everything
+
+
+def _failing_simulation(monkeypatch, kinds=("simulation",)):
+    """Make fit.plate.fit_plate raise SimulationError for ``kinds`` (the others run)."""
+    import invface.fit.plate as plate_module
+    from invface.errors import SimulationError
+    real = plate_module.fit_plate
+
+    def fit_plate(model, plate, calibration, curves, kind="blendshape", **options):
+        if kind in kinds:
+            raise SimulationError("Newton did NOT converge in 40 iterations (test)")
+        return real(model, plate, calibration, curves, kind=kind, **options)
+    monkeypatch.setattr(plate_module, "fit_plate", fit_plate)
+
+
+def test_a_kind_that_cannot_finish_is_recorded_and_the_others_are_written(small_expressive_model, tmp_path,
+                                                                          monkeypatch):
+    import json
+
+    from invface.fit.calibrate import Calibration
+    from invface.fit.samples import write_sample_plates
+    from invface.pipeline import fit_sequence
+    from invface.render.synthetic import skin_albedo, studio_light
+    m = small_expressive_model
+    path, = write_sample_plates(m, tmp_path / "plates", names=["smile_blendshape"], size=(240, 180))
+    cal = Calibration(gamma=studio_light(), albedo=skin_albedo(m))
+    _failing_simulation(monkeypatch)
+    frame, = fit_sequence(m, [path], cal, tmp_path / "out", kinds="both", shading=False)
+    assert set(frame.fits) == {"blendshape"} and "did NOT converge" in frame.failed["simulation"]
+    saved = json.loads((tmp_path / "out/blendshape/fit.json").read_text())
+    assert any("simulation model's fit did not finish: Newton did NOT" in n for n in saved["notes"])
+    assert not (tmp_path / "out/simulation").exists()
+    assert "simulation model&#x27;s fit did not finish" in (tmp_path / "out/index.html").read_text()
+    # no kind finishes: nothing is written, and saving names why
+    _failing_simulation(monkeypatch, kinds=("blendshape", "simulation"))
+    frame, = fit_sequence(m, [path], cal, tmp_path / "none", kinds="both", shading=False)
+    assert frame.fits == {} and not (tmp_path / "none").exists()
+    with pytest.raises(InvfaceError, match="no model kind finished: blendshape: Newton did NOT"):
+        frame.save(tmp_path / "none")

@@ -6,7 +6,7 @@ exit codes on top of it; benches, tests and scripts call this layer, never ``inv
     head = invface.build_model().model                          # the built-in template
     calib = invface.calibrate("plates/neutral.png", model=head)  # Eq. 14, pose from curves
     fit = invface.fit_plate("plates/smile_simulation.png", calib, model=head, kinds="both")
-    fit.save("out", head)
+    fit.save("out")
     fit["simulation"].weights, fit["simulation"].activations, fit.truth
 
 It sits above ``fit`` and ``report`` (a fit writes results that the report reads; the
@@ -50,7 +50,7 @@ def fit_plate(plate, calibration=None, model=None, kinds=("blendshape",), curves
     plate itself (``calibrate(pose="auto")``); other options as ``fit_frame`` (iterations,
     shading, lam_curves, solver, starts). Returns a FrameFit: ``fit[kind]`` is the kind's
     PlateFit (weights, jaw, rotation, translation, activations, curve_rms_px, seconds),
-    ``fit.truth`` the errors against a ground truth beside the plate, ``fit.save(dir, model)``."""
+    ``fit.truth`` the errors against a ground truth beside the plate, ``fit.save(dir)``."""
     from ..fit.calibrate import Calibration
     model = load_model(model)
     plate = as_plate(plate, camera)

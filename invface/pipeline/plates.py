@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InvfaceError
+from ..errors import InvfaceError, SimulationError
 from ..fit.lambdas import EQ14_LAMBDA, EQ15_LAMBDA_1, face_scale
 
 PLATE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr")
@@ -220,20 +220,23 @@ def truth_beside(plate):
 @dataclass
 class FrameFit:
     """One plate fitted with one or more model kinds: ``fits`` {kind: fit.plate.PlateFit},
-    ``truth`` {kind: score} where the plate has a ground truth, the plate, its curves and
-    their source, and the options used. ``save(folder)`` writes what ``invface fit-plate``
-    writes: <kind>/fit.json, <kind>/fit.npz and the report index.html."""
+    ``truth`` {kind: score} where the plate has a ground truth, ``failed`` {kind: reason}
+    for kinds that could not finish (the simulation did not reach an equilibrium), the
+    model, the plate, its curves and their source, and the options used. ``save(folder)`` writes what ``invface
+    fit-plate`` writes: <kind>/fit.json, <kind>/fit.npz and the report index.html."""
 
+    model: object
     plate: object
     curves: dict
     source: str
     fits: dict = field(default_factory=dict)
+    failed: dict = field(default_factory=dict)
     truth: dict = field(default_factory=dict)
     vertex_error: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     title: str | None = None
-    written: set = field(default_factory=set, repr=False)
+    written: dict = field(default_factory=dict, repr=False)    # (folder, kind) -> failures then
 
     def __getitem__(self, kind):
         return self.fits[kind]
@@ -248,6 +251,7 @@ class FrameFit:
         if self.source == DETECTOR:
             extra["notes"].insert(0, "Curves from the automatic landmark detector (MediaPipe Face Landmarker); "
                                      "its face oval masks the shading term.")
+        extra["notes"] += [f"The {k} model's fit did not finish: {why}" for k, why in self.failed.items()]
         if kind in self.truth:
             extra["truth"] = self.truth[kind]
         return extra
@@ -264,21 +268,25 @@ class FrameFit:
                      f"{t['shape_median_mm']:.3f} mm shape")
         return line
 
-    def save_kind(self, folder, model, kind):
+    def save_kind(self, folder, kind):
         """Write <folder>/<kind>/fit.json and fit.npz (each atomically)."""
         from ..fit.plate import write_plate_fit
-        path = write_plate_fit(Path(folder) / kind, model, self.fits[kind], self.plate, self.curves,
+        path = write_plate_fit(Path(folder) / kind, self.model, self.fits[kind], self.plate, self.curves,
                                extra=self.extra(kind), vertex_error=self.vertex_error.get(kind))
-        self.written.add((str(Path(folder)), kind))
+        self.written[str(Path(folder)), kind] = len(self.failed)
         return path
 
-    def save(self, folder, model):
-        """Write every kind's files (those not written there yet) and the report; returns the
-        report page's path."""
+    def save(self, folder):
+        """Write every kind's files (those not written there yet, or written before another
+        kind failed: their notes name it) and the report; returns the report page's path. An
+        InvfaceError naming the reasons when no kind finished."""
         from ..report.fit import write_report
+        if not self.fits:
+            raise InvfaceError(f"{self.name}: no model kind finished: "
+                               + "; ".join(f"{k}: {why}" for k, why in self.failed.items()))
         for kind in self.fits:
-            if (str(Path(folder)), kind) not in self.written:
-                self.save_kind(folder, model, kind)
+            if self.written.get((str(Path(folder)), kind)) != len(self.failed):
+                self.save_kind(folder, kind)
         return write_report(folder, title=self.title or f"invface plate fit: {self.name}")
 
 
@@ -290,21 +298,30 @@ def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), sta
     see ``find_curves`` (source: where given curves came from, for the report); starts: {kind: PlateFit} of the previous frame (warm start);
     lam_curves: lambda_1 of Eq. 15 (default: scaled with the face, ``curve_lambda``);
     on_kind(frame, kind): called as each kind finishes (to write it at once); camera: for a
-    plate path (see ``render.plates.load_plate``). Returns a FrameFit."""
+    plate path (see ``render.plates.load_plate``). A kind whose simulation cannot reach an
+    equilibrium is recorded in ``FrameFit.failed`` and the other kinds go on. Returns a
+    FrameFit."""
     from ..fit.plate import fit_plate
     plate = as_plate(plate, camera)
     calibration = getattr(calibration, "calibration", calibration)
     curves, found = find_curves(model, plate, curves)
     source = source or found
     lam = curve_lambda(curves, lam_curves)
-    frame = FrameFit(plate=plate, curves=curves, source=source, notes=list(notes), title=title,
+    frame = FrameFit(model=model, plate=plate, curves=curves, source=source, notes=list(notes), title=title,
                      options={"curve_lambda": lam, "solver": solver})
     truth = truth_beside(plate)
     for kind in model_kinds(kinds):
         def log(h, kind=kind):
             _say(progress, **dict(h, kind=kind, frame=frame.name))
-        fit = fit_plate(model, plate, calibration, curves, kind=kind, start=(starts or {}).get(kind),
-                        shading=shading, max_iter_shading=iterations, lam_curves=lam, solver=solver, progress=log)
+        try:
+            fit = fit_plate(model, plate, calibration, curves, kind=kind, start=(starts or {}).get(kind),
+                            shading=shading, max_iter_shading=iterations, lam_curves=lam, solver=solver,
+                            progress=log)
+        except SimulationError as e:
+            # the other kinds still finish and are written; the report says why this one is missing
+            frame.failed[kind] = str(e)
+            _say(progress, message=f"{frame.name} {kind}: did not finish ({e})")
+            continue
         frame.fits[kind] = fit
         if truth is not None:
             frame.truth[kind], frame.vertex_error[kind] = score_against_truth(model, fit, truth)
@@ -334,16 +351,16 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
 
         def finished(frame, kind, folder=folder):
             if folder is not None:
-                frame.save_kind(folder, model, kind)
+                frame.save_kind(folder, kind)
             if on_kind is not None:
                 on_kind(frame, kind)
         frame = fit_frame(model, path, calibration, curves, kinds=kinds, starts=starts, progress=progress,
                           on_kind=finished, **options)
-        if folder is not None:
-            frame.save(folder, model)
+        if folder is not None and frame.fits:
+            frame.save(folder)
         if on_frame is not None:
             on_frame(frame, folder)
-        starts = frame.fits
+        starts = {**(starts or {}), **frame.fits}
         results.append(frame)
     if out is not None and len(frames) > 1:
         from ..report.sequence import write_sequence_report
