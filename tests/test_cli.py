@@ -224,3 +224,13 @@ def test_fit_plate_writes_the_kinds_that_finish_and_exits_0(small_expressive_mod
     assert main(["fit-plate", *args, "-o", str(tmp_path / "none")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no model kind finished: blendshape: Newton did NOT converge" in err[0], err
+
+
+def test_report_names_a_truncated_fit_file_and_negative_iterations_are_refused(tmp_path):
+    (tmp_path / "fit.json").write_text('{"kind": "blendshape"}')
+    (tmp_path / "fit.npz").write_bytes(b"PK\x03\x04" + b"\x00" * 40)         # a zip cut short
+    r = run("report", str(tmp_path))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert str(tmp_path) in r.stderr and "truncated or corrupt" in r.stderr, r.stderr
+    r = run("fit-plate", str(tmp_path / "fit.json"), "--iterations", "-1")
+    assert r.returncode == 2 and "--iterations -1" in r.stderr and "Traceback" not in r.stderr

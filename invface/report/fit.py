@@ -16,6 +16,7 @@ from __future__ import annotations
 import html
 import json
 import os
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -205,8 +206,9 @@ def write_report(run, title=None):
     for f in folders:
         try:
             summary, pics = _fit_images(f)
-        except (OSError, ValueError, KeyError) as e:
-            raise InvfaceError(f"{f}: unreadable fit result ({e})") from None
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError) as e:
+            raise InvfaceError(f"{f}: unreadable fit result, fit.json or fit.npz truncated or corrupt "
+                               f"({type(e).__name__}: {e}); fit again") from None
         rel = os.path.relpath(f, run)
         rows.append(summary)
         figs = "".join(f'<figure><img src="{html.escape(os.path.join(rel, p))}"><figcaption>{html.escape(c)}'
