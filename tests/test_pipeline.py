@@ -125,30 +125,36 @@ def test_gradient_only_path_takes_one_adjoint_product(small_expressive_model):
     assert obj.terms["curves"] > 0 and obj.terms["prior"] > 0
 
 
-def test_readme_from_python_script_runs(tmp_path):
-    """The README's "From Python" script, as written (on the small head, output in tmp):
-    calibration and both kinds' fits of a sample plate, their files, and named results."""
+def test_readme_from_python_script_runs(small_expressive_model, tmp_path):
+    """The README's "From Python" script, as written, on the small head and its own sample
+    plates (rendered here at 360x270, as plates/ holds the default head's; output in tmp):
+    calibration and both kinds' fits, their files, and named results near the truth."""
+    import json
+
+    from invface.fit.samples import write_sample_plates
     text = (ROOT / "README.md").read_text()
     code = re.search(r"## From Python.*?```python\n(.*?)```", text, re.S).group(1)
     assert len(code.strip().splitlines()) <= 12
+    write_sample_plates(small_expressive_model, tmp_path / "plates", names=["neutral", "smile_simulation"],
+                        size=(360, 270))
     code = code.replace("invface.build_model()", f"invface.build_model(resolution={SMALL_RESOLUTION})")
-    code = code.replace('"out/', f'"{tmp_path}/').replace('"plates/', f'"{ROOT}/plates/')
+    code = code.replace('"out/', f'"{tmp_path}/out/').replace('"plates/', f'"{tmp_path}/plates/')
     scope = {}
     exec(compile(code, "README.md", "exec"), scope)
     fit, calib = scope["fit"], scope["calib"]
     for f in ("calib.npz", "calib_compare.png", "smile/index.html", "smile/blendshape/fit.json",
               "smile/simulation/fit.npz"):
-        assert (tmp_path / f).is_file(), f
+        assert (tmp_path / "out" / f).is_file(), f
     sim = fit["simulation"]
     assert calib.pose is not None and calib.rms < 0.05, calib.rms
-    # a smile (the plate was made by the default head: the small head's shapes differ, so its
-    # weights do: lipCornerPull 0.26 / 0.31 measured, truth 0.7 / 0.6)
-    smile = (sim.weights["lipCornerPull_L"], sim.weights["lipCornerPull_R"], sim.activations["zygomaticus_major_L"])
-    assert smile[0] + smile[1] > 0.3 and smile[2] > 0.02, smile
-    import json
-    saved = json.loads((tmp_path / "smile/simulation/fit.json").read_text())
+    # the truth: lipCornerPull_L 0.7, _R 0.6, cheekRaise 0.3 (zygomaticus major active); two runs
+    # measured 0.35 + 0.25 and 0.40 + 0.25 (the fit trades some of it for dimpler)
+    assert sim.weights["lipCornerPull_L"] + sim.weights["lipCornerPull_R"] > 0.4, sim.weights
+    assert sim.activations["zygomaticus_major_L"] > 0.05, sim.activations
+    saved = json.loads((tmp_path / "out/smile/simulation/fit.json").read_text())
     assert saved["weights"] == sim.weights and saved["truth"]["median_mm"] == fit.truth["simulation"]["median_mm"]
-    assert set(fit.truth) == {"blendshape", "simulation"} and fit.truth["simulation"]["shape_median_mm"] < 1.0, fit.truth
+    assert set(fit.truth) == {"blendshape", "simulation"}
+    assert all(t["shape_median_mm"] < 0.5 for t in fit.truth.values()), fit.truth
 
 
 def test_pipeline_refuses_unknown_kinds_and_one_curves_file_for_a_sequence(small_model, tmp_path):
