@@ -24,10 +24,10 @@ import numpy as np
 
 
 class _SurfaceOp(dr.CustomOp):
-    def eval(self, model, p, exact):
+    def eval(self, model, p):
         self.model = model
         self.ftype = type(p)
-        self.p = np.array(p, dtype=np.float64) if exact is None else np.asarray(exact, np.float64)
+        self.p = np.array(p, dtype=np.float64)
         x = model.surface(self.p)
         return self.ftype(np.ascontiguousarray(x, np.float32).reshape(-1))
 
@@ -71,16 +71,13 @@ class _PosedSurfaceOp(dr.CustomOp):
 class SurfaceFunction:
     """Callable: Dr.Jit Float parameters p (K+6,) -> flat Float vertex positions (3V,) m.
 
-    model: a surface model (FaceModel.surface_model(kind)); the gradient flows to p.
-    exact: the same parameters as float64 numpy (K+6,), for the surface model to be evaluated
-    at them rather than at p's float32 values (the optimiser's point, exactly)."""
+    model: a surface model (FaceModel.surface_model(kind)); the gradient flows to p."""
 
     def __init__(self, model):
         self.model = model
 
-    def __call__(self, p, exact=None):
-        return dr.custom(_SurfaceOp, self.model, p, exact)
-
+    def __call__(self, p):
+        return dr.custom(_SurfaceOp, self.model, p)
 
 
 class PosedSurfaceFunction:
@@ -90,7 +87,8 @@ class PosedSurfaceFunction:
     The pose is applied in float64 numpy inside the operation, so the positions are those
     of ``fit.pose.posed_surface`` to float32 rounding; the reverse pass is one adjoint product
     (``fit.pose.posed_vjp``: the surface model's ``surface_vjp`` once). exact: z as float64
-    numpy (see ``SurfaceFunction``); ``last`` keeps the float64 positions of the last call."""
+    numpy, for the surface model to be evaluated there rather than at z's float32 values (the
+    optimiser's point, exactly); ``last`` keeps the float64 positions of the last call."""
 
     def __init__(self, model, vector):
         self.model, self.vector = model, vector

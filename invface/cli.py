@@ -59,8 +59,6 @@ def cmd_build_model(args):
             raise InvfaceError("build-model --neutral needs -o/--output for the new model (.npz)")
         build = build_model(args.neutral, blendshapes=args.blendshapes, unit=args.unit,
                             expressions=args.expressions, resolution=args.resolution, progress=_events)
-        build.save(args.output)
-        print(f"wrote {args.output}")
         print("stage seconds: " + json.dumps({k: v for k, v in build.seconds.items() if k != "total"}))
     elif args.template or not args.input:
         print(f"building the template head (resolution {args.resolution:g})", flush=True)
@@ -68,7 +66,7 @@ def cmd_build_model(args):
     else:
         t0 = time.perf_counter()
         build = ModelBuild(load_model(args.input), seconds={"total": time.perf_counter() - t0})
-    if args.output and not args.neutral:
+    if args.output:
         build.save(args.output)
         print(f"wrote {args.output}")
     print("\n".join(build.describe()))
@@ -231,6 +229,7 @@ def _fit_frames(model, frames, cal, kinds, out, options, curves=None):
     def kind_done(frame, kind):
         bars.close()
         print(frame.describe(kind), flush=True)
+
     def frame_done(frame, folder):
         bars.close()
         for kind, why in frame.failed.items():
@@ -246,8 +245,7 @@ def _fit_frames(model, frames, cal, kinds, out, options, curves=None):
         print(f"sequence report: {out / 'index.html'}")
     empty = [r for r in results if not r.fits]
     if empty:      # exit non-zero only when a plate has no kind at all
-        raise InvfaceError(f"{empty[0].name}: no model kind finished: "
-                           + "; ".join(f"{k}: {why}" for k, why in empty[0].failed.items()))
+        raise InvfaceError(empty[0].failure())
 
 
 def cmd_fit_plate(args):

@@ -164,6 +164,8 @@ def test_pipeline_refuses_unknown_kinds_and_one_curves_file_for_a_sequence(small
         model_kinds("muscles")
     with pytest.raises(InvfaceError, match="one curves file names one plate"):
         fit_sequence(small_model, [ROOT / "plates/neutral.png"] * 2, None, curves="c.json")
+    with pytest.raises(InvfaceError, match="pose must be 'auto' or"):
+        invface.calibrate(ROOT / "plates/neutral.png", model=small_model, pose="frontal")
     assert set(invface.__all__) >= {"build_model", "fit_scan", "fit_plate", "calibrate"}
     with pytest.raises(AttributeError):
         invface.fit_everything

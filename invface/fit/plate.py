@@ -64,7 +64,7 @@ class PlateFit(NamedControls):
     def nonzero_weights(self):
         return int(np.sum(self.p[self.vector.weights] > 1e-2))
 
-    def summary(self, model=None):
+    def summary(self):
         """JSON-ready dict of the result (weights by name, jaw, pose, activations, errors)."""
         return {"kind": self.kind, "status": self.status, **self.vector.to_dict(self.z),
                 "nonzero_weights": self.nonzero_weights,
@@ -160,7 +160,7 @@ def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=
     """Write ``fit.json`` (summary) and ``fit.npz`` (plate, render, posed surface, curves,
     camera, and the per-vertex error (V,) m against a truth when given) into ``folder``
     atomically; the report (``invface.report.fit``) reads them."""
-    summary = dict(fit.summary(model), plate=str(plate.path), **(extra or {}))
+    summary = dict(fit.summary(), plate=str(plate.path), **(extra or {}))
     names = sorted(curves)
     arrays = {"plate": plate.image.astype(np.float32), "render": fit.render.astype(np.float32),
               "surface": fit.surface, "triangles": np.asarray(model.triangles),

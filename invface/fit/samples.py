@@ -55,8 +55,7 @@ def write_sample_plates(model, folder, names=None, size=(720, 540), noise=0.005,
         kind, weights, jaw, rot, tr = SAMPLES[name]
         if progress:
             progress(f"plate {name} ({kind} model)")
-        z = vec.from_dict({"weights": weights, "jaw": np.zeros(6) if jaw is None else jaw})
-        p = vec.unpack(z)[0]
+        p = model.parameters({"weights": weights, "jaw": np.zeros(6) if jaw is None else jaw})
         x = model.surface_model(kind).surface(p)
         image, _ = render_plate(model, x, cam, gamma, albedo, rot, tr, noise=noise, seed=i)
         path = write_image(folder / f"{name}.png", image)

@@ -58,7 +58,7 @@ class ScanFit(NamedControls):
     activations: dict = field(default_factory=dict)   # muscle -> activation (simulation fits)
     seconds: float = 0.0
 
-    def summary(self, model=None):
+    def summary(self):
         """JSON-ready dict: weights by name, jaw, pose, activations, error statistics in mm."""
         e = self.error[np.isfinite(self.error)] * 1000
         return {"kind": self.kind, "status": self.status, "iterations": len(self.history),
@@ -223,7 +223,7 @@ def write_scan_fit(folder, model, fit, **extra):
     """Write ``fit.json`` (the fit's summary, its history and ``extra``) and ``fit.npz``
     (posed surface, neutral, per-vertex error (V,) m, controls) into ``folder``, each through
     a temporary file; the report (``invface.report.fit``) reads them. Returns the summary."""
-    summary = dict(fit.summary(model), history=fit.history, **extra)
+    summary = dict(fit.summary(), history=fit.history, **extra)
     write_fit_files(folder, summary, dict(surface=fit.surface, triangles=model.triangles,
                                           neutral=model.neutral, vertex_error=fit.error, p=fit.p))
     return summary

@@ -140,7 +140,8 @@ class ShadingObjective:
         self.jacobian_spp = int(jacobian_spp)
         self.curves = CurveObjective(model, surface_model, camera, curves, 0.0) if curves else None
         self.terms = {}
-        self.bridge = None             # bridge.PosedSurfaceFunction of the gradient-only path
+        from ..bridge import PosedSurfaceFunction
+        self.bridge = PosedSurfaceFunction(surface_model, self.vec)     # the gradient-only path's
 
     def _prior_and_curves(self, z, xr, Jall=None):
         """Residual rows of the prior and curve terms at z (posed surface xr), scaled by the
@@ -197,9 +198,6 @@ class ShadingObjective:
         ``normal_equations``."""
         dr, mi, vec = self.dr, self.renderer.mi, self.vec
         z = np.asarray(z, np.float64)
-        if self.bridge is None:
-            from ..bridge import PosedSurfaceFunction
-            self.bridge = PosedSurfaceFunction(self.sm, vec)
         zd = mi.Float(z.astype(np.float32))
         dr.enable_grad(zd)
         xr = self.bridge(zd, exact=z)

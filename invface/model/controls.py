@@ -128,12 +128,6 @@ class FitVector:
         """p (K+6,) from b (K,) and jaw (6,) (zeros where not given)."""
         return self.pack(weights=weights, jaw=jaw)[self.controls]
 
-    def with_controls(self, z, p):
-        """z with its controls replaced by p (K+6,)."""
-        z = np.array(z, float)
-        z[self.controls] = self._checked(p, self.P, "controls p")
-        return z
-
     def with_pose(self, z, rotation, translation):
         """z with its pose replaced."""
         z = np.array(z, float)

@@ -23,11 +23,6 @@ def register_surface_model(kind, factory):
     _SURFACE_MODELS[str(kind)] = factory
 
 
-def surface_kinds():
-    """The registered surface-model kinds."""
-    return list(_SURFACE_MODELS)
-
-
 def _surface_factory(kind):
     f = _SURFACE_MODELS[kind]
     if isinstance(f, str):

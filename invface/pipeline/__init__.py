@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..errors import ConfigError
 from ..fit.lambdas import EQ14_LAMBDA
 from .models import ModelBuild, build_model, load_model
 from .plates import (FrameFit, PlateCalibration, PoseEstimate, as_plate, auto_calibrate, calibrate_plate,
@@ -35,7 +36,7 @@ def calibrate(plate, model=None, pose="auto", curves=None, camera=None, lam=None
     plate = as_plate(plate, camera)
     if isinstance(pose, str):
         if pose != "auto":
-            raise ValueError(f"pose must be 'auto' or (rotation, translation), not {pose!r}")
+            raise ConfigError(f"pose must be 'auto' or (rotation, translation), not {pose!r}")
         found, source = find_curves(model, plate, curves)
         return auto_calibrate(model, plate, found, source, lam=lam, max_iter=max_iter, progress=progress)
     rotation, translation = pose

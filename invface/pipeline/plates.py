@@ -256,6 +256,10 @@ class FrameFit:
             extra["truth"] = self.truth[kind]
         return extra
 
+    def failure(self):
+        """One line: the plate and why each kind that failed did not finish."""
+        return f"{self.name}: no model kind finished: " + "; ".join(f"{k}: {why}" for k, why in self.failed.items())
+
     def describe(self, kind):
         """One line on the kind's fit."""
         fit = self.fits[kind]
@@ -282,8 +286,7 @@ class FrameFit:
         InvfaceError naming the reasons when no kind finished."""
         from ..report.fit import write_report
         if not self.fits:
-            raise InvfaceError(f"{self.name}: no model kind finished: "
-                               + "; ".join(f"{k}: {why}" for k, why in self.failed.items()))
+            raise InvfaceError(self.failure())
         for kind in self.fits:
             if self.written.get((str(Path(folder)), kind)) != len(self.failed):
                 self.save_kind(folder, kind)
@@ -320,7 +323,6 @@ def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), sta
         except SimulationError as e:
             # the other kinds still finish and are written; the report says why this one is missing
             frame.failed[kind] = str(e)
-            _say(progress, message=f"{frame.name} {kind}: did not finish ({e})")
             continue
         frame.fits[kind] = fit
         if truth is not None:
