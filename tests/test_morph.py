@@ -96,7 +96,7 @@ def test_smooth_skin_embedding_and_its_derivatives(actors):
     i, h = model.blendshape_names.index("lipCornerPull_L"), 1e-4
     e = np.zeros_like(p)
     e[i] = h
-    x = [sim.surface_of(sim.solve(p + s * e, warm=r, contacts=r.sim.contacts, rtol=1e-10)) for s in (1, -1)]
+    x = [sim.surface_of(sim.solve(p + s * e, warm=None, rtol=1e-10)) for s in (1, -1)]
     fd = np.sum(gx * (x[0] - x[1])) / (2 * h)
     assert abs(g[i] - fd) <= 1e-4 * abs(fd), (g[i], fd)
 

@@ -13,12 +13,10 @@ Tangent mode solves all K+6 right-hand sides with one factorisation (the Jacobia
 needs); adjoint mode solves H mu = dL/dX^U once and contracts mu with dr/dp term by term,
 so a gradient costs one back-substitution whatever K is.
 
-Collisions: the planes of flesh-flesh contacts (the facing lip or lid) are frozen at the
-solution (lagged contact geometry, the same choice the Newton matrix makes); the active set
-is the penetrating contacts at the solution. The penalty force is C1 (k min(0, gap) n), so
-the derivative jumps only where a contact starts or stops touching: a one-sided derivative
-is returned there. The derivative is exact for the solve with those contacts held fixed
-(Simulator.solve(contacts=...)).
+Collisions: the contact energy (sim.collisions) is a C2 function of the flesh positions and
+the jaw transform, and its full Hessian is in the Newton matrix H, so with the jaw
+triangles' motion (``Collisions.jaw_derivative``) in dr/dp these are the derivatives of the
+equilibrium as a function of p, whatever state the solve started from.
 """
 from __future__ import annotations
 
@@ -52,7 +50,8 @@ class Sensitivity:
         j = model.fixed_jaw
         self.dXc[jaw_rows, j] = np.einsum("pab,nb->pna", dM[:, :3, :3], model.rest_positions[j]) + dM[:, None, :3, 3]
         self.active = sim.flesh.active_forces(X)                               # (Q,4,3)
-        self.dcontact = result.sim.contacts.jaw_derivative(X, dM, self.N)      # (6,N,3)
+        col = sim.collisions
+        self.dcontact = col.jaw_derivative(X, jm, dM) if col is not None else np.zeros((6, self.N, 3))
         _, _, self.Ke = sim.flesh.evaluate(X, result.sim.activations, 2)       # exact element stiffness
         self.free = sim.free
 

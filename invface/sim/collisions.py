@@ -1,39 +1,43 @@
 """Collision penalty forces (paper 000 Eq. 3): flesh against flesh (lip on lip, lid on lid)
 and flesh against bone (lips and cheeks against the teeth/jaw proxy).
 
-Each contact is a vertex v and a plane (point p, unit normal n) on the other side; with the
-penetration s = -n . (x_v - p) its penalty energy is k/2 s^2 (zero when separated), made C2
-at first touch by a cubic over the first ``CONTACT_SMOOTHING`` metres of penetration:
+Every contact is a free boundary vertex x and a plane on the other side, chosen once at
+set-up; its gap is a smooth function of the current state:
+
+  * flesh on flesh: the signed distance of x from the plane of one facing triangle (a, b, c)
+    of the other lip or lid, gap = n(a,b,c) . (x - a), n the triangle's unit normal, so the
+    plane moves and turns with the flesh it belongs to;
+  * flesh on bone: the signed distance from a plane fixed in the bone's frame (the Gaussian-
+    weighted plane of the nearest bone vertices at rest), moved rigidly by the jaw transform
+    for the mandible.
+
+With the penetration s = max(-gap, 0) the energy of a contact is the C2 penalty
 
     e(s) = 0 (s <= 0),  k s^3 / (6 d) (0 < s < d),  k/2 s^2 - k d/2 s + k d^2/6 (s >= d),
 
-so the force -e'(s) n pushes v back along n, its Jacobian is continuous (Newton keeps its
-quadratic convergence when a contact starts or stops touching) and the tangent/adjoint
-derivatives are those of a smooth function. The plane is a Gaussian-weighted average of the nearby partner
-vertices and their normals (the facing lip or lid, or the cranium/jaw mesh moved with the
-jaw), so it moves continuously with X and contacts do not flicker between partners.
+with the cubic onset over the first ``CONTACT_SMOOTHING`` metres. The total collision energy
+is therefore a C2 function of the flesh positions and the jaw parameters alone: its gradient
+and its full Hessian (e'' grad(gap) grad(gap)^T + e' hess(gap), the second term from the
+turning triangle) go into the Newton matrix and the tangent/adjoint solves, so the
+equilibrium is a function of the controls (not of the path of the solve) and its
+derivatives are the derivatives of that function (issue 25: with planes re-found during the
+solve, cold and warm solves of the same controls differed by 0.4 mm at a mouth corner, and
+the adjoint missed the finite differences by 7-35 %).
 
-Contact detection (``detect``) runs once per Newton iteration and freezes the planes;
-energy, gradient and Hessian (e''(s) n n^T per penetrating vertex) are exact for that frozen set,
-which keeps the line search consistent, and at a converged state the frozen planes are the
-current ones. Both sides of a flesh-flesh contact carry their own contact against the other
-side's plane, so the forces are equal and opposite to first order. The plane's dependence on
-X is left out of the Hessian (lagged contact geometry, the usual choice for penalty contact);
-this is also the choice the tangent/adjoint solves inherit.
-
-Flesh-flesh candidates are fixed at set-up: free boundary vertices within ``radius`` of each
-other in the rest state whose normals face each other, that are on each other's outer side
-and share no tet.
+A plane extended from one triangle stands for the facing surface near it; lips and lids
+slide along each other by a few millimetres at most before they separate, and every
+candidate pair was within ``radius`` at rest. Rest gaps below zero (a curved surface cutting
+a neighbour's plane) are subtracted, so the rest state is contact-free.
 """
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..mesh.closest import closest_on_triangles
 from ..mesh.tets import boundary_faces
-from ..mesh.triangles import group_offsets, vertex_normals
+from ..mesh.triangles import face_normals, vertex_normals
+from .materials import project_psd
 
 CONTACT_SMOOTHING = 2e-5     # m: the cubic onset of the contact penalty
 
@@ -48,230 +52,248 @@ def penalty(gap, k, d=CONTACT_SMOOTHING):
     return e, de, dde
 
 
-@dataclass
-class ContactSet:
-    """Frozen contacts: vertices v (c,), unit normals n (c,3), stiffness k (c,) N/m, and the
-    plane point p(X) = p0 + sum_j w_j x_{u_j}: static part p0 (c,3), partner vertices u
-    (c,K) (-1 = none) with frozen weights w (c,K). Bone contacts have no partners.
-
-    Planes on the jaw move rigidly with it: ``moves`` (c,) marks them and p_local, n_local
-    (c,3) hold them in the jaw's rest frame, so ``posed`` re-places them for another jaw
-    transform and ``jaw_derivative`` differentiates the forces with respect to it."""
-    v: np.ndarray
-    p0: np.ndarray
-    n: np.ndarray
-    k: np.ndarray
-    u: np.ndarray
-    w: np.ndarray
-    moves: np.ndarray = None
-    p_local: np.ndarray = None
-    n_local: np.ndarray = None
-
-    def __post_init__(self):
-        if self.moves is None:
-            self.moves = np.zeros(len(self.v), bool)
-            self.p_local, self.n_local = self.p0.copy(), self.n.copy()
-
-    def posed(self, M):
-        """The same contacts with the jaw planes placed by the jaw transform M (4,4)."""
-        p0, n = self.p0.copy(), self.n.copy()
-        m = self.moves
-        p0[m] = self.p_local[m] @ M[:3, :3].T + M[:3, 3]
-        n[m] = self.n_local[m] @ M[:3, :3].T
-        return ContactSet(self.v, p0, n, self.k, self.u, self.w, m, self.p_local, self.n_local)
-
-    def jaw_derivative(self, X, dM, n_vertices):
-        """d(energy gradient)/d(jaw parameter) (P,N,3) for jaw-transform derivatives dM (P,4,4).
-
-        Only the penetrating jaw contacts contribute: with gap = n.(x - p0), the gradient
-        e'(gap) n changes by e'' dgap n + e' dn, dn = dR n_local, dp0 = dR p_local + dt.
-        """
-        out = np.zeros((len(dM), n_vertices, 3))
-        gap = self.gaps(X)
-        m = self.moves & (gap < 0)
-        if not m.any():
-            return out
-        x, n, p0 = X[self.v[m]], self.n[m], self.p0[m]
-        _, de, dde = penalty(gap[m], self.k[m])
-        for i, D in enumerate(dM):
-            dn = self.n_local[m] @ D[:3, :3].T
-            dp = self.p_local[m] @ D[:3, :3].T + D[:3, 3]
-            dgap = np.einsum("ci,ci->c", dn, x - p0) - np.einsum("ci,ci->c", n, dp)
-            np.add.at(out[i], self.v[m], (dde * dgap)[:, None] * n + de[:, None] * dn)
-        return out
-
-    def gaps(self, X):
-        p = self.p0 + np.einsum("ck,cki->ci", self.w, X[np.maximum(self.u, 0)])
-        return np.einsum("ci,ci->c", self.n, X[self.v] - p)
-
-    def energy(self, X):
-        return float(penalty(self.gaps(X), self.k)[0].sum())
-
-    def gradient(self, X, n_vertices):
-        """Energy gradient (N,3) (= minus the collision forces)."""
-        f = penalty(self.gaps(X), self.k)[1][:, None] * self.n
-        out = np.zeros((n_vertices, 3))
-        np.add.at(out, self.v, f)
-        m = self.u >= 0
-        np.add.at(out, self.u[m], -(self.w[..., None] * f[:, None, :])[m])
-        return out
-
-    def blocks(self, X):
-        """Hessian blocks [(pairs (P,2), B (P,3,3))] of the penetrating contacts:
-        e''(s) n n^T (e_v - sum_j w_j e_uj)(e_v - sum_j w_j e_uj)^T."""
-        gap = self.gaps(X)
-        pen = gap < 0
-        k = penalty(gap[pen], self.k[pen])[2]
-        v, n, u, w = self.v[pen], self.n[pen], self.u[pen], self.w[pen]
-        nn = k[:, None, None] * np.einsum("ci,cj->cij", n, n)
-        ids = np.concatenate([v[:, None], u], axis=1)                 # (c, 1+K)
-        coef = np.concatenate([np.ones((len(v), 1)), -w], axis=1)
-        coef = np.where(ids >= 0, coef, 0.0)
-        K1 = ids.shape[1]
-        a, b = np.meshgrid(np.arange(K1), np.arange(K1), indexing="ij")
-        pairs = np.stack([ids[:, a.ravel()], ids[:, b.ravel()]], axis=2)   # (c, K1^2, 2)
-        cc = coef[:, a.ravel()] * coef[:, b.ravel()]
-        m = (pairs[..., 0] >= 0) & (pairs[..., 1] >= 0) & (cc != 0)
-        B = cc[..., None, None] * nn[:, None]
-        return [(pairs[m], B[m])]
-
-    @staticmethod
-    def empty():
-        z = np.zeros((0, 3))
-        return ContactSet(np.zeros(0, np.int64), z, z, np.zeros(0), np.zeros((0, 1), np.int64), np.zeros((0, 1)))
+def _skew(v):
+    """Cross-product matrices (c,3,3): _skew(v) @ w = v x w."""
+    z = np.zeros(len(v))
+    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1),
+                     np.stack([v[:, 2], z, -v[:, 0]], 1),
+                     np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
 
 
-def gaussian_weights(x, P, h):
-    """Normalised Gaussian weights (c,k) of candidates P (c,k,3) (NaN = invalid) around x (c,3)."""
-    d2 = np.sum((P - x[:, None]) ** 2, axis=2)
-    w = np.exp(-(d2 - np.nanmin(d2, axis=1, keepdims=True)) / h ** 2)
-    w = np.where(np.isfinite(w), w, 0.0)
-    return w / w.sum(1, keepdims=True)
+# (e1, e2, d) = A q for q = (x, a, b, c): e1 = b - a, e2 = c - a, d = x - a
+_A = np.kron(np.array([[0, -1, 1, 0], [0, -1, 0, 1], [1, -1, 0, 0]], float), np.eye(3))
 
 
-def weighted_planes(x, P, N, h):
-    """Gaussian-weighted planes at points x (c,3) from candidates P, N (c,k,3), width h (m).
+def plane_gap(x, a, b, c, order=2):
+    """Signed distances (c,) of points x from the planes of triangles (a, b, c) (each (c,3)),
+    positive on the side of (b - a) x (c - a); with order >= 1 also the gradient (c,12) and
+    with order 2 the Hessian (c,12,12) with respect to q = (x, a, b, c)."""
+    e1, e2, d = b - a, c - a, x - a
+    n = np.cross(e1, e2)
+    L = np.linalg.norm(n, axis=1)
+    nh = n / L[:, None]
+    s = np.einsum("ci,ci->c", n, d)
+    gap = s / L
+    if order == 0:
+        return gap
+    z = np.zeros_like(n)
+    ds = np.concatenate([np.cross(e2, d), np.cross(d, e1), n], 1)           # in (e1, e2, d)
+    dL = np.concatenate([np.cross(e2, nh), np.cross(nh, e1), z], 1)
+    dg = ds / L[:, None] - (s / L ** 2)[:, None] * dL
+    if order == 1:
+        return gap, dg @ _A
+    Sd, S1, S2, Sn = _skew(d), _skew(e1), _skew(e2), _skew(nh)
+    Z = np.zeros_like(Sd)
+    Hs = np.concatenate([np.concatenate([Z, -Sd, S2], 2),
+                         np.concatenate([Sd, Z, -S1], 2),
+                         np.concatenate([-S2, S1, Z], 2)], 1)
+    dn = np.concatenate([-S2, S1, Z], 2)                                      # (c,3,9)
+    N2 = np.concatenate([np.concatenate([Z, -Sn, Z], 2),
+                         np.concatenate([Sn, Z, Z], 2),
+                         np.concatenate([Z, Z, Z], 2)], 1)
+    outer = lambda u, v: np.einsum("ci,cj->cij", u, v)
+    HL = (np.einsum("cki,ckj->cij", dn, dn) - outer(dL, dL)) / L[:, None, None] + N2
+    Hg = (Hs / L[:, None, None] - (outer(ds, dL) + outer(dL, ds)) / (L ** 2)[:, None, None]
+          + (2 * s / L ** 3)[:, None, None] * outer(dL, dL) - (s / L ** 2)[:, None, None] * HL)
+    return gap, dg @ _A, _A.T @ Hg @ _A
 
-    Invalid candidates carry NaN positions. Returns p (c,3), n (c,3) unit, weights (c,k).
-    """
-    w = gaussian_weights(x, P, h)
-    p = np.einsum("ck,cki->ci", w, np.nan_to_num(P))
-    n = np.einsum("ck,cki->ci", w, np.nan_to_num(N))
-    return p, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30), w
+
+def _smoothstep(u):
+    """C2 smoothstep S(u) = 10u^3 - 15u^4 + 6u^5 on [0, 1] (clipped) and its two derivatives."""
+    u = np.clip(u, 0.0, 1.0)
+    return u ** 3 * (10 - 15 * u + 6 * u * u), 30 * u * u * (u - 1) ** 2, 60 * u * (2 * u - 1) * (u - 1)
 
 
-class BoneSurface:
-    """A bone triangle mesh (vertices (B,3), triangles (F,3)) in its rest frame, normals
-    oriented towards the flesh, queried as a Gaussian-weighted plane of the k nearest vertices."""
+_C = np.array([1.0, -1 / 3, -1 / 3, -1 / 3])      # x - centroid(a, b, c) = sum_k _C[k] q_k
 
-    def __init__(self, vertices, triangles, flesh_points, k=8):
-        self.V = np.asarray(vertices, float)
-        tri = np.asarray(triangles, np.int64)
-        self.N = vertex_normals(self.V, tri, len(self.V))
-        self.h = 0.5 * float(np.linalg.norm(self.V[tri[:, 1]] - self.V[tri[:, 0]], axis=1).mean())
-        self.tree, self.k = cKDTree(self.V), min(k, len(self.V))
-        if len(flesh_points):
-            p, n = self.planes(flesh_points)
-            if np.median(np.einsum("ci,ci->c", n, flesh_points - p)) < 0:
-                self.N = -self.N
 
-    def planes(self, points, M=None):
-        """Planes (p (c,3), n (c,3)) in world space for points (c,3); M (4,4) the bone's
-        current rigid transform (None = rest)."""
-        R, t = (np.eye(3), np.zeros(3)) if M is None else (M[:3, :3], M[:3, 3])
-        local = (points - t) @ R
-        _, i = self.tree.query(local, k=self.k)
-        i = i.reshape(len(points), -1)
-        p, n, _ = weighted_planes(local, self.V[i], self.N[i], self.h)
-        return p @ R.T + t, n @ R.T
+def contact_energy(q, rest_gap, reach, k, order=2):
+    """Energy of contacts q = (x, a, b, c) (c,12): the penalty of the gap of x from the
+    plane of (a, b, c) less its rest gap ``rest_gap`` (c,), times a gate w(r) of the distance
+    r of x from the triangle's centroid that is 1 up to ``reach`` (c,2)[:, 0] and falls
+    smoothly (C2) to 0 at reach[:, 1]: the plane of one triangle stands for the facing
+    surface only near it. Stiffness k (N/m). Returns e (c,), and with order >= 1 the gradient
+    (c,12), with order 2 the Hessian (c,12,12)."""
+    x, a, b, c = (q[:, 3 * i:3 * i + 3] for i in range(4))
+    out = plane_gap(x, a, b, c, order)
+    gap = (out if order == 0 else out[0]) - rest_gap
+    e, de, dde = penalty(gap, k)
+    dv = x - (a + b + c) / 3
+    r = np.maximum(np.linalg.norm(dv, axis=1), 1e-30)
+    span = reach[:, 1] - reach[:, 0]
+    S, dS, ddS = _smoothstep((r - reach[:, 0]) / span)
+    w, dw, ddw = 1 - S, -dS / span, -ddS / span ** 2
+    if order == 0:
+        return w * e
+    rh = dv / r[:, None]
+    dr = (_C[None, :, None] * rh[:, None, :]).reshape(-1, 12)
+    dg = out[1]
+    grad = (dw * e)[:, None] * dr + (w * de)[:, None] * dg
+    if order == 1:
+        return w * e, grad
+    outer = lambda u, v: np.einsum("ci,cj->cij", u, v)
+    P = (np.eye(3)[None] - outer(rh, rh)) / r[:, None, None]
+    Hr = np.einsum("ab,cij->caibj", np.outer(_C, _C), P).reshape(-1, 12, 12)
+    Hg = out[2]
+    H = ((ddw * e)[:, None, None] * outer(dr, dr) + (dw * e)[:, None, None] * Hr
+         + (dw * de)[:, None, None] * (outer(dr, dg) + outer(dg, dr))
+         + (w * dde)[:, None, None] * outer(dg, dg) + (w * de)[:, None, None] * Hg)
+    return w * e, grad, H
+
+
+def _pairs(points, normals, Q, tri, radius, facing, exclude=None):
+    """(point, triangle) pairs of points (P,3) with unit normals (P,3) and the triangles of
+    (Q, tri) whose centroid lies within ``radius``, whose unit normal n has n . normal <
+    ``facing`` and that have the point on their outer side; exclude(point ids, triangle ids)
+    -> bool masks pairs out. Returns (point ids, triangle ids)."""
+    if not len(points) or not len(tri):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    fn = face_normals(Q, tri)
+    fn /= np.linalg.norm(fn, axis=1, keepdims=True)
+    near = cKDTree(Q[tri].mean(1)).query_ball_point(points, radius)
+    i = np.repeat(np.arange(len(points)), [len(f) for f in near])
+    f = np.fromiter((j for fs in near for j in fs), np.int64, count=len(i))
+    keep = (np.einsum("ci,ci->c", normals[i], fn[f]) < facing) \
+        & (np.einsum("ci,ci->c", fn[f], points[i] - Q[tri[f, 0]]) >= -1e-9)
+    if exclude is not None and keep.any():
+        keep[keep] = ~exclude(i[keep], f[keep])
+    return i[keep], f[keep]
 
 
 class Collisions:
     """Contact model of a FaceModel's flesh: lips/lids self-contact and flesh against bone.
 
-    stiffness: penalty stiffness N/m per contact vertex; radius: candidate search radius (m).
+    free_mask (N,): the simulated vertices; stiffness: penalty stiffness N/m per contact;
+    radius: how far apart (m) at rest a vertex and its triangle may be; it is also the gate's
+    width (``contact_energy``): a contact acts while its vertex is within its rest distance
+    from the triangle's centroid plus ``radius``, and fades out over the next ``radius``.
+
+    Contacts are fixed at set-up: ``v`` (c,) free boundary vertices, ``tri`` (c,3) their
+    triangles as ids into the point array Q = (flesh vertices (N), cranium mesh vertices,
+    jaw mesh vertices) (``points``), the jaw's moved rigidly by the jaw transform. A flesh
+    vertex's triangle is the nearest free boundary triangle within ``radius`` at rest that
+    faces it (normals opposed), has it on its outer side and shares no tet with it (the other
+    lip or lid); otherwise, the nearest bone triangle facing it, if any.
     """
 
-    def __init__(self, model, free_mask, stiffness, radius=0.004, bone_gap=0.0):
-        X0, tets = model.rest_positions, model.tets
+    def __init__(self, model, free_mask, stiffness, radius=0.004):
+        X0, tets = np.asarray(model.rest_positions, float), model.tets
         N = len(X0)
-        self.n_vertices, self.stiffness, self.bone_gap = N, float(stiffness), bone_gap
-        self.faces, _ = boundary_faces(tets)
-        bverts = np.unique(self.faces)
-        nrm = vertex_normals(X0, self.faces, N)
+        self.n_vertices, self.stiffness, self.radius = N, float(stiffness), radius
+        faces, _ = boundary_faces(tets)
+        nrm = vertex_normals(X0, faces, N)
+        bverts = np.unique(faces)
         cand = bverts[free_mask[bverts]]
 
-        # flesh-flesh candidates: free boundary vertices near at rest, facing, separated, no shared tet
-        ij = cKDTree(X0[cand]).query_pairs(radius, output_type="ndarray")
-        pairs = cand[np.concatenate([ij, ij[:, ::-1]])] if len(ij) else np.zeros((0, 2), np.int64)
-        facing = np.einsum("pi,pi->p", nrm[pairs[:, 0]], nrm[pairs[:, 1]]) < -0.5
-        # v must lie on the outer side of u's surface at rest (not behind it)
-        outside = np.einsum("pi,pi->p", nrm[pairs[:, 1]], X0[pairs[:, 0]] - X0[pairs[:, 1]]) >= -1e-9
-        pairs = pairs[facing & outside]
-        if len(pairs):
-            pairs = pairs[~_share_tet(tets, N, pairs)]
-        # padded partner table: self_vertices (c,), partners (c, kmax) with -1 padding
-        self.self_vertices, inv = np.unique(pairs[:, 0], return_inverse=True)
-        slot = np.zeros(len(pairs), np.int64)
-        order = np.argsort(inv, kind="stable")
-        counts = np.bincount(inv, minlength=len(self.self_vertices))
-        slot[order] = group_offsets(counts)
-        self.partners = np.full((len(self.self_vertices), counts.max(initial=0)), -1, np.int64)
-        self.partners[inv, slot] = pairs[:, 1]
-        self.radius = radius
+        # flesh on flesh
+        tri = faces[free_mask[faces].all(1)]
+        share = lambda i, f: np.any([_share_tet(tets, N, np.stack([cand[i], tri[f, k]], 1)) for k in range(3)], 0)
+        i, f = _pairs(X0[cand], nrm[cand], X0, tri, radius, -0.5, share)
+        vs, tris = [cand[i]], [tri[f]]
 
-        # flesh-bone candidates: free boundary vertices facing a bone (not the skin side),
-        # within ``radius`` of it and outside it at rest
-        self.bones = []
+        # flesh on bone
+        self.bone_vertices, offset, self.jaw_range, self.jaw_rest = [], N, (N, N), np.zeros((0, 3))
         for mesh, moves in ((model.cranium_mesh, False), (model.jaw_mesh, True)):
             if mesh is None or len(mesh[0]) == 0:
                 continue
-            d, _ = cKDTree(mesh[0]).query(X0[cand], distance_upper_bound=radius)
-            near = cand[np.isfinite(d)]
-            if not len(near):
-                continue
-            bone = BoneSurface(mesh[0], mesh[1], X0[near])
-            p, n = bone.planes(X0[near])
-            ok = (np.einsum("ci,ci->c", n, nrm[near]) < 0) & (np.einsum("ci,ci->c", n, X0[near] - p) >= -1e-9)
-            if ok.any():
-                self.bones.append((bone, moves, near[ok]))
-        # the weighted planes of curved surfaces may cut a rest vertex slightly: measure
-        # gaps from the rest gap where that is negative, so the rest state is contact-free
-        self.offset = 0.0
-        self.offset = np.minimum(self.detect(X0).gaps(X0), 0.0)
+            V, T = np.asarray(mesh[0], float), np.asarray(mesh[1], np.int64)
+            i, f = _pairs(X0[cand], nrm[cand], V, T, radius, 1.0)        # any orientation first
+            if len(i) and np.median(np.einsum("ci,ci->c", face_normals(V, T[f]), X0[cand[i]] - V[T[f, 0]])) < 0:
+                T = T[:, ::-1]                                          # normals towards the flesh
+            i, f = _pairs(X0[cand], nrm[cand], V, T, radius, 0.0)
+            vs.append(cand[i])
+            tris.append(T[f] + offset)
+            self.bone_vertices.append(V)
+            if moves:
+                self.jaw_range, self.jaw_rest = (offset, offset + len(V)), V
+            offset += len(V)
+        self.v, self.tri = np.concatenate(vs), np.concatenate(tris)
+        self.flesh = (self.tri < N).all(1)
+        self.rest_gap = np.zeros(len(self.v))
+        Q0 = self.points(X0, np.eye(4))
+        q0 = self._q(Q0)
+        self.rest_gap = np.minimum(plane_gap(*(q0[:, 3 * i:3 * i + 3] for i in range(4)), order=0), 0.0)
+        self.reach = np.tile([0.0, radius], (len(self.v), 1))
+
+    def __len__(self):
+        return len(self.v)
+
+    def points(self, X, M):
+        """The point array Q (N + bone vertices, 3): flesh positions X (N,3), cranium mesh
+        vertices, jaw mesh vertices moved by the jaw transform M (4,4)."""
+        parts = [np.asarray(X, float)] + list(self.bone_vertices)
+        Q = np.concatenate(parts) if len(parts) > 1 else parts[0].copy()
+        j0, j1 = self.jaw_range
+        Q[j0:j1] = Q[j0:j1] @ M[:3, :3].T + M[:3, 3]
+        return Q
+
+    def _q(self, Q, m=slice(None)):
+        return np.concatenate([Q[self.v[m]], Q[self.tri[m]].reshape(-1, 9)], 1)
 
     def coupled_pairs(self):
-        """Vertex pairs (P,2) that flesh-flesh contacts may couple (for the sparsity pattern)."""
-        ids = np.concatenate([self.self_vertices[:, None], self.partners], axis=1)
-        K1 = ids.shape[1]
-        a, b = np.meshgrid(np.arange(K1), np.arange(K1), indexing="ij")
-        pairs = np.stack([ids[:, a.ravel()], ids[:, b.ravel()]], axis=2).reshape(-1, 2)
-        return pairs[(pairs >= 0).all(1)]
+        """Flesh vertex pairs (P,2) that contacts couple (for the sparsity pattern)."""
+        ids = np.concatenate([self.v[:, None], self.tri], 1)[self.flesh]
+        a, b = np.meshgrid(np.arange(4), np.arange(4), indexing="ij")
+        return np.stack([ids[:, a.ravel()], ids[:, b.ravel()]], 2).reshape(-1, 2)
 
-    def detect(self, X, jaw_matrix=None):
-        """Current contacts (ContactSet) at positions X (N,3); jaw_matrix (4,4) moves the jaw."""
-        parts = []
-        K = max(self.partners.shape[1], 1)
-        if len(self.self_vertices):
-            nrm = vertex_normals(X, self.faces, self.n_vertices)
-            valid = self.partners >= 0
-            P = np.where(valid[..., None], X[self.partners], np.nan)
-            _, n, w = weighted_planes(X[self.self_vertices], P, nrm[self.partners], 0.5 * self.radius)
-            parts.append((self.self_vertices, np.zeros_like(n), n, self.partners, w, False))
-        for bone, moves, near in self.bones:
-            p, n = bone.planes(X[near], jaw_matrix if moves else None)
-            parts.append((near, p + self.bone_gap * n, n, np.full((len(near), K), -1), np.zeros((len(near), K)),
-                          moves))
-        if not parts:
-            return ContactSet.empty()
-        v, p0, n, u, w = (np.concatenate(z) for z in list(zip(*parts))[:5])
-        moving = np.concatenate([np.full(len(z[0]), z[5]) for z in parts])
-        p0 = p0 + np.reshape(self.offset, (-1, 1)) * n
-        M = np.eye(4) if jaw_matrix is None else jaw_matrix
-        p_local, n_local = p0.copy(), n.copy()
-        p_local[moving] = (p0[moving] - M[:3, 3]) @ M[:3, :3]
-        n_local[moving] = n[moving] @ M[:3, :3]
-        return ContactSet(v, p0, n, np.full(len(v), self.stiffness), u, w, moving, p_local, n_local)
+    def gaps(self, X, M):
+        """Gaps (c,) (m) of the contacts at positions X (N,3) and jaw transform M (4,4), less
+        their rest gaps; negative = penetrating (whether or not the gate lets them act)."""
+        q = self._q(self.points(X, M))
+        return plane_gap(*(q[:, 3 * i:3 * i + 3] for i in range(4)), order=0) - self.rest_gap
+
+    def _active(self, X, M, order):
+        """The contacts that act (penetrating, inside their gate): (mask (c,), energy terms)."""
+        Q = self.points(X, M)
+        q = self._q(Q)
+        gap = plane_gap(*(q[:, 3 * i:3 * i + 3] for i in range(4)), order=0) - self.rest_gap
+        r = np.linalg.norm(q[:, :3] - Q[self.tri].mean(1), axis=1)
+        m = (gap < 0) & (r < self.reach[:, 1])
+        return m, contact_energy(q[m], self.rest_gap[m], self.reach[m], self.stiffness, order)
+
+    def energy(self, X, M):
+        """Collision energy (J) at positions X (N,3), jaw transform M (4,4)."""
+        return float(self._active(X, M, 0)[1].sum())
+
+    def gradient(self, X, M):
+        """Energy gradient (N,3) (= minus the collision forces)."""
+        m, (_, grad) = self._active(X, M, 1)
+        ids = np.concatenate([self.v[m, None], self.tri[m]], 1).reshape(-1)
+        grad = grad.reshape(-1, 3)
+        flesh = ids < self.n_vertices
+        out = np.zeros((self.n_vertices, 3))
+        np.add.at(out, ids[flesh], grad[flesh])
+        return out
+
+    def blocks(self, X, M, project=False):
+        """Hessian blocks [(pairs (P,2), B (P,3,3))] of the acting contacts over their flesh
+        vertices (each contact's 12x12 Hessian projected to PSD when ``project``)."""
+        m, (_, _, H) = self._active(X, M, 2)
+        if project and len(H):
+            H = project_psd(H)
+        ids = np.concatenate([self.v[m, None], self.tri[m]], 1)
+        a, b = np.meshgrid(np.arange(4), np.arange(4), indexing="ij")
+        pairs = np.stack([ids[:, a.ravel()], ids[:, b.ravel()]], 2).reshape(-1, 2)
+        B = H.reshape(-1, 4, 3, 4, 3).transpose(0, 1, 3, 2, 4).reshape(-1, 3, 3)
+        keep = (pairs < self.n_vertices).all(1)
+        return [(pairs[keep], B[keep])]
+
+    def jaw_derivative(self, X, M, dM):
+        """d(energy gradient)/d(jaw parameter) (P,N,3) for jaw-transform derivatives dM (P,4,4):
+        the acting contacts on jaw triangles, H[x, (a,b,c)] d(a,b,c)/dj."""
+        out = np.zeros((len(dM), self.n_vertices, 3))
+        m, (_, _, H) = self._active(X, M, 2)
+        j0, j1 = self.jaw_range
+        on_jaw = (self.tri[m] >= j0).all(1) & (self.tri[m] < j1).all(1)
+        if not on_jaw.any():
+            return out
+        H = H[on_jaw]
+        v, tri = self.v[m][on_jaw], self.tri[m][on_jaw]
+        rest = self.jaw_rest[tri - j0]                                       # (c,3,3) jaw frame
+        for i, D in enumerate(dM):
+            dq = (rest @ D[:3, :3].T + D[:3, 3]).reshape(-1, 9)
+            np.add.at(out[i], v, np.einsum("cij,cj->ci", H[:, :3, 3:], dq))
+        return out
 
 
 def _share_tet(tets, n_vertices, pairs):

@@ -66,16 +66,15 @@ class DrivenSimulation:
         """(b (K,), jaw (6,)) from a parameter vector p (K+6,); validates it."""
         return split_parameters(p, self.parameter_names, self.n_blendshapes)
 
-    def solve(self, p, warm="last", contacts=None, **kw):
+    def solve(self, p, warm="last", **kw):
         """DrivenResult for parameters p. warm: 'last' (the previous solve), a DrivenResult or
-        None (cold, from the jaw-skinned rest state); contacts: a frozen ContactSet (see
-        Simulator.solve); other keywords go to Simulator.solve."""
+        None (cold, from the jaw-skinned rest state); other keywords go to Simulator.solve."""
         b, jaw = self.split(p)
         state = self.tracks.evaluate(b, self.model.jaw_matrix(jaw))
         if isinstance(warm, str):
             warm = self.last
         res = self.sim.solve(state.activations, jaw, tracks=self.tracks.springs(state),
-                             warm=warm.sim if warm is not None else None, contacts=contacts, **kw)
+                             warm=warm.sim if warm is not None else None, **kw)
         out = DrivenResult(np.asarray(p, float).copy(), state, res)
         self.last = out
         self.solved.add(out.p.tobytes())

@@ -3,7 +3,7 @@
 Energy density per unit rest volume, as a function of the deformation gradient F:
 
     Psi(F) = mu10 (I1 - 3) + mu01 (I2 - 3) - (2 mu10 + 4 mu01)(J - 1)     isotropic Mooney-Rivlin
-           + kappa/2 (J - 1)^2                                             quasi-incompressibility
+           + kappa/2 (J - 1)^2 + k_b b(J)                                  quasi-incompressibility
            + sigma_max [ psi_p(lam) + a psi_a(lam) ],  lam = |F d|           fibre (Eq. 4)
 
 with I1 = tr C, I2 = (I1^2 - tr C^2)/2, C = F^T F, J = det F, d the unit fibre direction in the
@@ -13,11 +13,14 @@ f_a(lam) = exp(-((lam-1)/w)^2); psi_p, psi_a are their integrals from lam = 1, s
 stress is sigma_max (f_p + a f_a) and the force is linear in a as Eq. 4 states.
 
 The Mooney-Rivlin invariants are used unsplit (not J^-2/3-scaled) and the linear J term cancels
-the rest stress: every term is a polynomial in F (the fibre term in |F d|), so energy, stress
-and stiffness are defined and smooth through element inversion and degeneracy (J <= 0). This
-is the robustness that Irving/Teran's diagonalised stress extrapolation provides, obtained from
-the energy itself (as in Smith et al. 2018, "Stable Neo-Hookean flesh"), which keeps force =
--grad energy exact so the Newton line search can use the energy. The definiteness fix of
+the rest stress: every term but the barrier is a polynomial in F (the fibre term in |F d|), so
+stress and stiffness are smooth through strong compression, and force = -grad energy exactly,
+so the Newton line search can use the energy. The polynomial volume term alone is finite
+through inversion (as in Smith et al. 2018, "Stable Neo-Hookean flesh"), and on the default
+head a 0.45 rad jaw opening then drove Newton into a state where one lip tet had flattened
+(J = 7e-9) and no step could lower the energy without inverting it. The barrier b(J) (zero
+for J >= ``barrier_start``, infinite at J = 0) makes every energy minimum inversion-free:
+the energy of an inverted element is +inf, which the line search rejects. The definiteness fix of
 Teran et al. is the per-element projection of dP/dF onto its non-negative eigenspace
 (``project_psd``), used when the exact Newton matrix is not positive definite.
 
@@ -43,7 +46,8 @@ class Material:
 
     Defaults: soft facial tissue (shear modulus 2 (mu10 + mu01) = 5 kPa, bulk 50x that:
     Poisson ratio ~0.49), muscle peak isometric stress 40 kPa, Blemker passive curve
-    (P1 = 0.05, P2 = 6.6), active force-length width 0.5 (force halves at 42 % strain).
+    (P1 = 0.05, P2 = 6.6), active force-length width 0.5 (force halves at 42 % strain),
+    volume barrier from J = 0.2 with the bulk modulus as its stiffness (``volume_barrier``).
     """
     mu10: float = 2000.0
     mu01: float = 500.0
@@ -52,6 +56,8 @@ class Material:
     passive_p1: float = 0.05
     passive_p2: float = 6.6
     active_width: float = 0.5
+    barrier_start: float = 0.2
+    barrier_stiffness: float = 250000.0
 
     def as_dict(self):
         return asdict(self)
@@ -64,7 +70,21 @@ class Material:
     def params(self):
         """The constants as the float64 array (7,) the kernels take, in field order."""
         return np.array([self.mu10, self.mu01, self.kappa, self.sigma_max,
-                         self.passive_p1, self.passive_p2, self.active_width])
+                         self.passive_p1, self.passive_p2, self.active_width,
+                         self.barrier_start, self.barrier_stiffness])
+
+
+@nb.njit(**JIT)
+def volume_barrier(J, J0, k):
+    """Inversion barrier k b(J), b = -(J - J0)^2 log(J / J0) for 0 < J < J0, else 0 (the
+    C2 barrier of IPC, Li et al. 2020, applied to the volume ratio): its value and first two
+    derivatives in J. It leaves every state with J >= J0 unchanged and makes the energy grow
+    without bound as a tet flattens, so an energy minimum has no inverted tet."""
+    if J >= J0:
+        return 0.0, 0.0, 0.0
+    u, lg = J - J0, math.log(J / J0)
+    return (-k * u * u * lg, -k * (2 * u * lg + u * u / J),
+            -k * (2 * lg + 4 * u / J - u * u / (J * J)))
 
 
 @nb.njit(**JIT)
@@ -90,11 +110,15 @@ def iso_element(F, prm, order, P, H):
         cof[1, j] = F[2, j1] * F[0, j2] - F[0, j1] * F[2, j2]
         cof[2, j] = F[0, j1] * F[1, j2] - F[1, j1] * F[0, j2]
     J = F[0, 0] * cof[0, 0] + F[1, 0] * cof[1, 0] + F[2, 0] * cof[2, 0]
+    if J <= 0.0:
+        return np.inf                      # outside the barrier's domain (see volume_barrier)
     c = 2 * mu10 + 4 * mu01
-    psi = mu10 * (I1 - 3) + mu01 * (I2 - 3) - c * (J - 1) + 0.5 * kappa * (J - 1) ** 2
+    b0, b1, b2 = volume_barrier(J, prm[7], prm[8])
+    psi = mu10 * (I1 - 3) + mu01 * (I2 - 3) - c * (J - 1) + 0.5 * kappa * (J - 1) ** 2 + b0
     if order == 0:
         return psi
-    sJ = kappa * (J - 1) - c
+    sJ = kappa * (J - 1) - c + b1
+    sJJ = kappa + b2
     FC = F @ C
     for i in range(3):
         for j in range(3):
@@ -108,7 +132,7 @@ def iso_element(F, prm, order, P, H):
         for j in range(3):
             for a in range(3):
                 for b in range(3):
-                    h = 2 * mu01 * (2 * F[i, j] * F[a, b] - F[i, b] * F[a, j]) + kappa * cof[i, j] * cof[a, b]
+                    h = 2 * mu01 * (2 * F[i, j] * F[a, b] - F[i, b] * F[a, j]) + sJJ * cof[i, j] * cof[a, b]
                     if i == a:
                         h += 2 * mu01 * (I1 * (j == b) - C[j, b]) + 2 * mu10 * (j == b)
                     if j == b:

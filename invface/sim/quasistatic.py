@@ -8,12 +8,17 @@ The unknowns are the free flesh vertices X^U; cranium vertices are fixed at rest
 vertices follow the 6-DOF jaw transform. The steady state zeroes the sum of FVM, collision
 and track forces, i.e. it is a stationary point of the total energy
 
-    E(X) = sum_t V_t Psi(F_t; a) + E_collisions(X) + sum_v k_v/2 |x_v - t_v|^2.
+    E(X) = sum_t V_t Psi(F_t; a) + E_collisions(X; j) + sum_v k_v/2 |x_v - t_v|^2,
+
+a C2 function of the state X and the inputs (a, j, t) alone (the contacts of sim.collisions
+are fixed at set-up; Psi's volume barrier makes E infinite for an inverted tet).
 
 Each Newton step factorises the exact Hessian first and falls back to the per-element
 definiteness-projected one when the factorisation fails or the step is not a descent
 direction (DESIGN.md: exact-first took 5 iterations where always-projected took 23). A
-backtracking Armijo line search on E that also refuses to create inverted tets follows.
+backtracking Armijo line search on E follows (it refuses inverting steps: E is infinite
+there). When Newton cannot reach the target from its start, the solve steps the inputs
+along the path from the start's (load stepping, ``Simulator.solve``).
 The exact Hessian at the solution is kept on the result; its factorisation
 (``SimResult.solver``) is made on first use by the tangent/adjoint solves (sim.adjoint).
 """
@@ -27,7 +32,7 @@ import numpy as np
 from ..errors import InvfaceError, MeshError, SimulationError
 from ..mesh.tets import face_use, mean_edge_length
 from . import linsolve
-from .collisions import Collisions, ContactSet
+from .collisions import Collisions
 from .fem import Elements, FleshModel, Pattern
 from .materials import Material
 from .tracks import Tracks
@@ -40,8 +45,9 @@ class SimResult:
     X (N,3) m flesh positions; activations (M,); jaw (6,); iterations; residuals: relative
     residual per iteration; energy J; inverted: number of inverted tets; min_J: smallest
     volume ratio; seconds: wall time by phase; newton_data: the exact Newton matrix at X
-    (upper CSR data over the free DOFs of the simulator's pattern); contacts: the frozen
-    ContactSet the solution satisfies; tracks: the Tracks it was solved with.
+    (upper CSR data over the free DOFs of the simulator's pattern); load_steps: the load
+    steps the solve needed (0: Newton went straight there); tracks: the Tracks it was solved
+    with.
     """
     X: np.ndarray
     activations: np.ndarray
@@ -54,7 +60,7 @@ class SimResult:
     min_J: float
     seconds: dict = field(default_factory=dict)
     newton_data: np.ndarray = None
-    contacts: ContactSet = None
+    load_steps: int = 0
     tracks: Tracks = None
     _make_solver: object = field(default=None, repr=False)
     _solver: object = field(default=None, repr=False)
@@ -78,7 +84,8 @@ class SimResult:
         """One-paragraph status line for logs and errors."""
         r = self.residuals[-1] if self.residuals else float("nan")
         state = "converged" if self.converged else "did NOT converge"
-        return (f"Newton {state} in {self.iterations} iterations: relative residual {r:.2e}, "
+        steps = f" over {self.load_steps} load steps" if self.load_steps else ""
+        return (f"Newton {state} in {self.iterations} iterations{steps}: relative residual {r:.2e}, "
                 f"{self.inverted} inverted tets (min volume ratio {self.min_J:.3f}), "
                 f"{sum(self.seconds.values()):.2f} s")
 
@@ -134,14 +141,11 @@ class Simulator:
         self.collisions = None
         if contact:
             k = contact_stiffness or 50.0 * shear * self.edge_length
-            self.collisions = Collisions(model, ~constrained, k, radius=2.0 * self.edge_length)
+            self.collisions = Collisions(model, ~constrained, k, radius=1.5 * self.edge_length)
         pairs = self.collisions.coupled_pairs() if self.collisions else None
         self.pattern = Pattern(dof, tets, pairs)
         self._solver_name = solver
         self._solver = self.make_solver()                                # symbolic analysis once
-        # contact planes are re-detected after a Newton step that moved some vertex by more than
-        # refresh_distance (m), during the first refresh_iterations iterations
-        self.refresh_iterations, self.refresh_distance = 10, 0.05 * self.edge_length
         # force scale for the absolute convergence floor: shear x edge^2 per vertex
         self.force_scale = shear * self.edge_length ** 2
 
@@ -182,76 +186,122 @@ class Simulator:
         return X
 
     # -- energy -----------------------------------------------------------------------------
-    def _total(self, X, act, contacts, tracks, order, project=False):
+    def _total(self, X, act, jm, tracks, order, project=False):
+        """Total energy, free-DOF gradient and Newton matrix data at X for activations act,
+        jaw transform jm (4,4) (the bone contacts' planes) and tracks."""
         E, g_nodes, Ke = self.flesh.evaluate(X, act, order, project)
-        E += contacts.energy(X)
+        col = self.collisions
+        if col is not None:
+            E += col.energy(X, jm)
         if tracks is not None:
             E += tracks.energy(X)
-        if order == 0:
+        if order == 0 or not np.isfinite(E):
             return E, None, None
         g = self.pattern.scatter(g_nodes)
-        gv = contacts.gradient(X, self.N)
+        gv = col.gradient(X, jm) if col is not None else np.zeros((self.N, 3))
         if tracks is not None:
             np.add.at(gv, tracks.vertices, tracks.gradient(X))
         g += gv[self.free].reshape(-1)
         if order == 1:
             return E, g, None
-        blocks = contacts.blocks(X)
+        blocks = col.blocks(X, jm, project) if col is not None else []
         if tracks is not None:
             blocks.append(tracks.blocks())
         return E, g, self.pattern.assemble(Ke, blocks)
 
-    def energy(self, X, activations=None, tracks=None, contacts=None, order=1):
-        """Total energy (J), free-DOF gradient (n,) and Newton matrix data (upper CSR) at X."""
+    def energy(self, X, activations=None, tracks=None, jaw=None, order=1):
+        """Total energy (J), free-DOF gradient and Newton matrix data (upper CSR) at X (N,3)
+        for activations, tracks and jaw parameters (6,) (the jaw's contact planes)."""
         act = self.activation_vector(activations)
-        return self._total(np.asarray(X, float), act, contacts or ContactSet.empty(), tracks, order)
+        return self._total(np.asarray(X, float), act, self.model.jaw_matrix(_jaw_vector(jaw)), tracks, order)
 
     def make_solver(self):
         """A new solver for this simulator's sparsity pattern (symbolic analysis done)."""
         return linsolve.make_solver(self.pattern, self._solver_name)
 
     # -- Newton -----------------------------------------------------------------------------
-    def solve(self, activations=None, jaw=None, tracks=None, warm=None, contacts=None, rtol=1e-6,
+    def solve(self, activations=None, jaw=None, tracks=None, warm=None, rtol=1e-6,
               max_iter=40, raise_on_failure=True, progress=None):
         """Steady state for muscle activations (dict or (M,)), jaw parameters (6,), optional
         Tracks (Eq. 5), warm start from a previous SimResult. Returns a SimResult.
 
-        contacts: a ContactSet to keep frozen (jaw planes re-posed for ``jaw``) instead of
-        detecting contacts; the solution is then a smooth function of the inputs.
-
         Converged when the free-DOF residual |f| <= rtol * max(|f_0|, force scale), where f_0
         is the residual at the start (force scale: shear modulus x edge length^2 per DOF).
+
+        Newton goes straight to the target from the warm state (or the jaw-skinned rest
+        state). If that fails, the solve follows the straight path from the start's inputs
+        (the warm result's, or rest) to the target's in load steps: each step is Newton-solved
+        from the previous step's state, a failed step is halved and a good one doubles the
+        next, down to 1/``MIN_STEP`` of the path. The energy is a function of the state and
+        the inputs alone, so the equilibrium reached does not depend on the path taken
+        (up to the Newton tolerance) as long as it is the same local minimum.
         """
         t_all = time.perf_counter()
         act = self.activation_vector(activations)
         jaw = _jaw_vector(jaw)
         secs = {"assembly": 0.0, "factor": 0.0, "solve": 0.0, "line_search": 0.0}
-        Xc = self.constrained_positions(jaw)
-        jm = self.model.jaw_matrix(jaw)
         if warm is not None:
-            X = warm.X + self.model.skinned_volume(jaw) - self.model.skinned_volume(warm.jaw)
+            X0, a0, j0 = warm.X, warm.activations, warm.jaw
+            T0 = warm.tracks.targets if _same_tracks(warm.tracks, tracks) else None
         else:
-            X = self.model.skinned_volume(jaw)
+            X0, a0, j0, T0 = self.model.rest_positions.astype(float), np.zeros_like(act), np.zeros(6), None
+        if tracks is not None and T0 is None:
+            T0 = X0[tracks.vertices]
+        out = self._newton(self._start(X0, j0, jaw), act, jaw, tracks, rtol, max_iter, progress, secs)
+        steps, total = 0, out[2]
+        if not out[1]:
+            X, t, h = X0, 0.0, 0.5
+            while h >= 1.0 / self.MIN_STEP:
+                t1 = min(1.0, t + h)
+                a_t, j_t = a0 + t1 * (act - a0), j0 + t1 * (jaw - j0)
+                tr = None if tracks is None else Tracks(tracks.vertices, T0 + t1 * (tracks.targets - T0),
+                                                        tracks.stiffness)
+                j_prev = j0 + t * (jaw - j0)
+                step = self._newton(self._start(X, j_prev, j_t), a_t, j_t, tr, rtol if t1 == 1.0 else 1e-4,
+                                    max_iter, progress, secs)
+                steps, total = steps + 1, total + step[2]
+                if step[1]:
+                    X, t, h = step[0], t1, 2 * h
+                    if t1 == 1.0:
+                        out = step
+                        break
+                else:
+                    h /= 2
+        X, converged, _, residuals, E, data = out
+        vols = self.elements.volumes(X) / self.elements.volume
+        res = SimResult(X=X, activations=act, jaw=jaw, converged=converged, iterations=total,
+                        residuals=residuals, energy=float(E), inverted=int((vols <= 0).sum()),
+                        min_J=float(vols.min()), seconds=secs, newton_data=data, load_steps=steps,
+                        tracks=tracks, _make_solver=self.make_solver)
+        secs["other"] = time.perf_counter() - t_all - sum(secs.values())
+        if not converged and raise_on_failure:
+            raise SimulationError(res.report())
+        return res
+
+    MIN_STEP = 64           # the smallest load step is 1/64 of the path from start to target
+
+    def _start(self, X, jaw_from, jaw_to):
+        """Start state for jaw parameters jaw_to from a state X at jaw_from: the jaw-skinned
+        displacement added, constrained vertices exactly placed."""
+        X = X + self.model.skinned_volume(jaw_to) - self.model.skinned_volume(jaw_from)
         fixed = self.dof_of_vertex < 0
-        X[fixed] = Xc[fixed]
-        solver = self._solver
-        refresh = self.collisions is not None and contacts is None
-        if contacts is not None:
-            contacts = contacts.posed(jm)
-        elif warm is not None and warm.contacts is not None:
-            contacts = warm.contacts.posed(jm)
-        elif self.collisions:
-            contacts = self.collisions.detect(X, jm)
-        else:
-            contacts = ContactSet.empty()
-        residuals, ref = [], None
-        converged, it = False, 0
-        vols = self.elements.volumes(X)
-        n_inv = int((vols <= 0).sum())
+        X[fixed] = self.constrained_positions(jaw_to)[fixed]
+        return X
+
+    def _newton(self, X, act, jaw, tracks, rtol, max_iter, progress, secs):
+        """Newton from X: (X, converged, iterations, relative residuals, energy, matrix data).
+
+        Stops early when stalled: after 10 iterations, a residual above half the one five
+        iterations before (a state the line search cannot leave; load stepping takes over)."""
+        jm = self.model.jaw_matrix(jaw)
+        residuals, ref, data = [], None, None
+        converged, it, E = False, 0, np.inf
         while True:
             t = time.perf_counter()
-            E, g, data = self._total(X, act, contacts, tracks, 2)
+            E, g, data = self._total(X, act, jm, tracks, 2)
             secs["assembly"] += time.perf_counter() - t
+            if not np.isfinite(E):          # an inverted start: outside the energy's domain
+                break
             r = float(np.linalg.norm(g))
             if ref is None:
                 ref = max(r, self.force_scale * np.sqrt(len(g)))
@@ -262,35 +312,23 @@ class Simulator:
                 break
             if r <= rtol * ref:
                 converged = True
-            if converged or it >= max_iter:
+            stalled = it >= 10 and residuals[-1] > 0.5 * residuals[-6]
+            if converged or stalled or it >= max_iter:
                 break
             it += 1
-            dx = self._newton_step(solver, X, act, contacts, tracks, data, g, secs)
+            dx = self._newton_step(X, act, jm, tracks, data, g, secs)
             t = time.perf_counter()
-            Xn, _, n_inv = self._line_search(X, dx, E, g, act, contacts, tracks, n_inv)
+            X = self._line_search(X, dx, E, g, act, jm, tracks)
             secs["line_search"] += time.perf_counter() - t
-            moved = float(np.abs(Xn - X).max())
-            X = Xn
-            # contact planes follow X while it moves, then stay frozen so the last iterations
-            # solve one smooth problem and converge quadratically
-            if refresh and it < self.refresh_iterations and moved > self.refresh_distance:
-                contacts = self.collisions.detect(X, jm)
-        vols = self.elements.volumes(X) / self.elements.volume
-        res = SimResult(X=X, activations=act, jaw=jaw, converged=converged, iterations=it,
-                        residuals=residuals, energy=float(E), inverted=int((vols <= 0).sum()),
-                        min_J=float(vols.min()), seconds=secs, newton_data=data,
-                        contacts=contacts, tracks=tracks, _make_solver=self.make_solver)
-        secs["other"] = time.perf_counter() - t_all - sum(secs.values())
-        if not converged and raise_on_failure:
-            raise SimulationError(res.report())
-        return res
+        return X, converged, it, residuals, E, data
 
-    def _newton_step(self, solver, X, act, contacts, tracks, data, g, secs):
+    def _newton_step(self, X, act, jm, tracks, data, g, secs):
         """Newton direction: exact Hessian first, projected when not SPD or not descent."""
+        solver = self._solver
         for project in (False, True):
             if project:
                 t = time.perf_counter()
-                _, _, data = self._total(X, act, contacts, tracks, 2, project=True)
+                _, _, data = self._total(X, act, jm, tracks, 2, project=True)
                 secs["assembly"] += time.perf_counter() - t
             t = time.perf_counter()
             try:
@@ -307,36 +345,29 @@ class Simulator:
         # even the projected matrix failed (singular): fall back to a scaled gradient step
         return -g / (np.abs(data[self.pattern.diag_slot]).max() + 1e-30)
 
-    def _line_search(self, X, dx, E, g, act, contacts, tracks, n_inv):
-        """Backtracking Armijo on the energy; never increases the inverted-tet count."""
+    def _line_search(self, X, dx, E, g, act, jm, tracks):
+        """Backtracking Armijo on the energy (infinite for an inverted tet, so a step that
+        inverts one is refused); near convergence, where the energy decrease is below its
+        round-off, the longest step that reduces the residual."""
         step = np.zeros_like(X)
         step[self.free] = dx.reshape(-1, 3)
         slope = float(dx @ g)
         alpha = 1.0
-        # the energy test is meaningful only while the predicted decrease is above the
-        # round-off of E; below it a noisy E would accept vanishing steps
         for _ in range(40 if -slope > 1e-9 * abs(E) else 0):
             Xn = X + alpha * step
-            vols = self.elements.volumes(Xn)
-            inv = int((vols <= 0).sum())
-            if inv <= n_inv:
-                En, _, _ = self._total(Xn, act, contacts, tracks, 0)
-                if np.isfinite(En) and En <= E + 1e-4 * alpha * slope:
-                    return Xn, En, inv
+            En, _, _ = self._total(Xn, act, jm, tracks, 0)
+            if np.isfinite(En) and En <= E + 1e-4 * alpha * slope:
+                return Xn
             alpha *= 0.5
-        # Otherwise (and near convergence) accept the longest step that reduces the residual (also what carries Newton over the kink of a
-        # penalty contact that starts or stops touching).
         r0 = np.linalg.norm(g)
         alpha = 1.0
         for _ in range(12):
             Xn = X + alpha * step
-            inv = int((self.elements.volumes(Xn) <= 0).sum())
-            if inv <= n_inv:
-                En, gn, _ = self._total(Xn, act, contacts, tracks, 1)
-                if np.linalg.norm(gn) < r0:
-                    return Xn, En, inv
+            En, gn, _ = self._total(Xn, act, jm, tracks, 1)
+            if np.isfinite(En) and np.linalg.norm(gn) < r0:
+                return Xn
             alpha *= 0.5
-        return X, E, n_inv
+        return X
 
     def volume_change(self, result):
         """Relative change of the total flesh volume of a SimResult (dimensionless)."""
@@ -352,6 +383,11 @@ def _scalar(value, name):
         return float(value)
     except (TypeError, ValueError):
         raise InvfaceError(f"activation of {name} must be a number, got {value!r}") from None
+
+
+def _same_tracks(a, b):
+    """Whether two Tracks (or None) act on the same vertices."""
+    return a is not None and b is not None and np.array_equal(a.vertices, b.vertices)
 
 
 def _jaw_vector(jaw):
