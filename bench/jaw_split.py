@@ -78,7 +78,7 @@ def main():
         head = (f"jaw {np.degrees(j[:3]).round(1).tolist()} deg, {(j[3:] * 1000).round(1).tolist()} mm; mean "
                 f"offset {s['mean_before_mm']:.2f} -> {s['mean_after_mm']:.2f} mm" if s else "not a jaw shape")
         print(f"{n}: {head}; simulation vs imported {e.mean():.2f} / {np.median(e):.2f} / "
-              f"{np.quantile(e, 0.95):.2f} mm ({sec:.1f} s); {deepest(r)}; {creases(model, r.X, target)}")
+              f"{np.quantile(e, 0.95):.2f} mm ({sec:.1f} s); {deepest(sim, r)}; {creases(model, r.X, target)}")
         if a.no_contact:
             e = np.linalg.norm(free.surface(p) - target, axis=1)[moved] * 1000
             print(f"    without contacts: {e.mean():.2f} / {np.median(e):.2f} / {np.quantile(e, 0.95):.2f} mm")
@@ -86,22 +86,21 @@ def main():
             targets[n] = target
     own = invface.template.build(resolution=a.resolution)          # with its simulated expressions
     p = own.parameters({"weights": {"jawOpen": 1.0}, "jaw": own.meta["blendshape_jaw"]["jawOpen"]})
-    print(f"the template's own jawOpen (simulated when it was built): {deepest(DrivenSimulation(own).solve(p))}")
+    own_sim = DrivenSimulation(own)
+    print(f"the template's own jawOpen (simulated when it was built): {deepest(own_sim, own_sim.solve(p))}")
     for n, target in targets.items() if a.unsplit else ():
         print(f"{n} unsplit: {unsplit(model, n, target)}")
 
 
-def deepest(result):
-    """The deepest penetration (mm) of the solved state's contacts: flesh on flesh, flesh on
-    the cranium (upper teeth), flesh on the jaw (lower teeth)."""
-    c = result.sim.contacts
-    if c is None or not len(c.v):
+def deepest(ds, result):
+    """The deepest penetration (mm) of the acting contacts of a DrivenSimulation's solved
+    state: flesh on flesh, flesh on the cranium (upper teeth), flesh on the jaw (lower teeth)."""
+    c = ds.sim.collisions
+    if c is None or not len(c):
         return "no contacts"
-    g = -c.gaps(result.X) * 1000
-    flesh = (c.u >= 0).any(1)
-    jaw = c.moves & ~flesh
-    kinds = {"flesh": flesh, "cranium": ~flesh & ~jaw, "jaw": jaw}
-    return "deepest contact " + ", ".join(f"{k} {max(g[m].max(initial=0), 0):.1f}" for k, m in kinds.items()) + " mm"
+    M = ds.model.jaw_matrix(ds.split(result.p)[1])
+    g = np.where(c.acting(result.X, M), -c.gaps(result.X, M) * 1000, 0.0)
+    return "deepest contact " + ", ".join(f"{k} {g[m].max(initial=0):.1f}" for k, m in c.kinds().items()) + " mm"
 
 
 def creases(model, X, target):

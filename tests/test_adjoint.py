@@ -103,10 +103,8 @@ def test_adjoint_matches_cold_finite_differences_with_contacts_acting(small_expr
                       "jaw": [-0.04, 0.02, -0.01, 0.0005, -0.0004, 0.0003]})
     r = ds.solve(p, warm=None, rtol=1e-10)
     c, jm = ds.sim.collisions, m.jaw_matrix(ds.split(p)[1])
-    Q = c.points(r.X, jm)
-    acting = (c.gaps(r.X, jm) < 0) & (np.linalg.norm(Q[c.v] - Q[c.tri].mean(1), axis=1) < c.reach[:, 1])
-    on_jaw = (c.tri >= c.jaw_range[0]).all(1)
-    assert (acting & c.flesh).sum() > 20 and (acting & on_jaw).sum() > 5
+    acting, kinds = c.acting(r.X, jm), c.kinds()
+    assert (acting & kinds["flesh"]).sum() > 20 and (acting & kinds["jaw"]).sum() > 5
     gx = np.random.default_rng(3).standard_normal(m.neutral.shape)
     g = ds.surface_vjp(p, gx)
     vec = FitVector(m.blendshape_names)
@@ -208,8 +206,7 @@ def test_posed_bridge_is_one_adjoint_product_of_the_pose_and_the_model(small_exp
     """bridge.PosedSurfaceFunction: z = (p, rotation, translation) -> x_R; its reverse pass is
     the posed Jacobian's transpose for both kinds (the simulation's through one surface_vjp)
     and matches finite differences on the rig in every entry kind (a weight, the jaw,
-    rotation, translation); its forward pass is the posed Jacobian. (Finite differences of
-    the simulation with contacts re-found per solve differ: issue 25.)"""
+    rotation, translation); its forward pass is the posed Jacobian."""
     from invface.bridge import PosedSurfaceFunction
     from invface.fit.pose import posed_jacobian, posed_surface
     from invface.model import FitVector

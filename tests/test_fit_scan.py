@@ -65,8 +65,7 @@ def _truth(model, kind, seed=0):
     rng = np.random.default_rng(seed)
     p = np.r_[np.where(rng.random(K) < 0.3, rng.uniform(0.2, 0.8, K), 0), [0.08, 0, 0, 0, 0, 0]]
     sm = model.surface_model(kind)
-    # the simulation solved cold, from rest: a warm start from another test's state can
-    # find another lip contact state (path dependence near contacts)
+    # the simulation solved cold, from rest (the same surface as warm, to the Newton tolerance)
     x = sm.surface(p) if kind == "blendshape" else sm.surface_of(sm.solve(p, warm=None))
     return p, x @ euler_xyz(ROT).T + TR
 

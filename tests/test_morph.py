@@ -90,7 +90,7 @@ def test_smooth_skin_embedding_and_its_derivatives(actors):
     assert np.abs(W @ model.rest_positions - model.neutral).max() < 1e-12
     sim = model.surface_model("simulation")
     p = model.parameters({"lipCornerPull_L": 0.6, "jawOpen": 0.3})
-    r = sim.solve(p, warm=None, rtol=1e-10)
+    sim.solve(p, warm=None, rtol=1e-10)
     gx = np.random.default_rng(2).standard_normal(model.neutral.shape)
     g = sim.surface_vjp(p, gx)
     i, h = model.blendshape_names.index("lipCornerPull_L"), 1e-4

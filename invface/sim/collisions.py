@@ -1,40 +1,42 @@
 """Collision penalty forces (paper 000 Eq. 3): flesh against flesh (lip on lip, lid on lid)
 and flesh against bone (lips and cheeks against the teeth/jaw proxy).
 
-Every contact is a free boundary vertex x and a plane on the other side, chosen once at
-set-up; its gap is a smooth function of the current state:
+A contact is a free boundary vertex x and a triangle (a, b, c) on the other side, paired once
+at set-up: every facing triangle of the other lip or lid, or of the cranium or jaw mesh,
+whose centroid lies within ``radius`` (1.5 tet edges) of the vertex at rest. Its energy is
 
-  * flesh on flesh: the signed distance of x from the plane of one facing triangle (a, b, c)
-    of the other lip or lid, gap = n(a,b,c) . (x - a), n the triangle's unit normal, so the
-    plane moves and turns with the flesh it belongs to;
-  * flesh on bone: the signed distance from a plane fixed in the bone's frame (the Gaussian-
-    weighted plane of the nearest bone vertices at rest), moved rigidly by the jaw transform
-    for the mandible.
+    E = w(r) e(gap),   gap = n(a,b,c) . (x - a) - gap_rest,   r = |x - centroid(a,b,c)|
 
-With the penetration s = max(-gap, 0) the energy of a contact is the C2 penalty
+with n the triangle's unit normal (so the plane moves and turns with the flesh or bone it
+belongs to; jaw triangles move rigidly with the jaw transform), gap_rest the rest gap where
+that is negative (the rest state is contact-free), e the C2 penalty of the penetration
+s = max(-gap, 0)
 
-    e(s) = 0 (s <= 0),  k s^3 / (6 d) (0 < s < d),  k/2 s^2 - k d/2 s + k d^2/6 (s >= d),
+    e(s) = 0 (s <= 0),  k s^3 / (6 d) (0 < s < d),  k/2 s^2 - k d/2 s + k d^2/6 (s >= d)
 
-with the cubic onset over the first ``CONTACT_SMOOTHING`` metres. The total collision energy
-is therefore a C2 function of the flesh positions and the jaw parameters alone: its gradient
-and its full Hessian (e'' grad(gap) grad(gap)^T + e' hess(gap), the second term from the
-turning triangle) go into the Newton matrix and the tangent/adjoint solves, so the
-equilibrium is a function of the controls (not of the path of the solve) and its
-derivatives are the derivatives of that function (issue 25: with planes re-found during the
-solve, cold and warm solves of the same controls differed by 0.4 mm at a mouth corner, and
-the adjoint missed the finite differences by 7-35 %).
+(cubic onset over ``CONTACT_SMOOTHING``), and w a C2 bump (1 at the centroid, 0 from
+``radius`` on): each triangle's plane stands for the facing surface only near that
+triangle, and a vertex's triangles hand over to each other smoothly as it slides. (One
+plane per vertex extended without a gate made false contacts: lips dragged below the upper
+teeth's edge by a 0.45 rad jaw opening were 6-9 mm "behind" its planes.)
 
-A plane extended from one triangle stands for the facing surface near it; lips and lids
-slide along each other by a few millimetres at most before they separate, and every
-candidate pair was within ``radius`` at rest. Rest gaps below zero (a curved surface cutting
-a neighbour's plane) are subtracted, so the rest state is contact-free.
+The total collision energy is therefore a C2 function of the flesh positions and the jaw
+parameters alone; its gradient and full Hessian (including the turning of the planes and
+the gate) go into the Newton matrix and the tangent/adjoint solves, so the equilibrium is a
+function of the controls, not of the path of the solve, and its derivatives are the
+derivatives of that function (issue 25: with planes re-found during the solve, cold and
+warm solves of the same controls differed by 0.4 mm at a mouth corner, and the adjoint
+missed finite differences of cold solves by 7-35 %).
+
+Limits: a vertex that slides more than about ``radius`` from where it was at rest leaves its
+triangles; the template's bone meshes are open sheets, so a lip dragged past the edge of the
+teeth has no contact there (issue 29 brings teeth).
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..mesh.closest import closest_on_triangles
 from ..mesh.tets import boundary_faces
 from ..mesh.triangles import face_normals, vertex_normals
 from .materials import project_psd
@@ -164,16 +166,14 @@ class Collisions:
     """Contact model of a FaceModel's flesh: lips/lids self-contact and flesh against bone.
 
     free_mask (N,): the simulated vertices; stiffness: penalty stiffness N/m per contact;
-    radius: how far apart (m) at rest a vertex and its triangle may be; it is also the gate's
-    width (``contact_energy``): a contact acts while its vertex is within its rest distance
-    from the triangle's centroid plus ``radius``, and fades out over the next ``radius``.
+    radius (m): the pairing distance at rest and the width of each contact's gate.
 
-    Contacts are fixed at set-up: ``v`` (c,) free boundary vertices, ``tri`` (c,3) their
-    triangles as ids into the point array Q = (flesh vertices (N), cranium mesh vertices,
-    jaw mesh vertices) (``points``), the jaw's moved rigidly by the jaw transform. A flesh
-    vertex's triangle is the nearest free boundary triangle within ``radius`` at rest that
+    Contacts are fixed at set-up: ``v`` (c,) free boundary vertices, ``tri`` (c,3) triangles
+    as ids into the point array Q = (flesh vertices (N), cranium mesh vertices, jaw mesh
+    vertices) (``points``), the jaw's moved rigidly by the jaw transform. A flesh vertex is
+    paired with every free boundary triangle whose centroid is within ``radius`` at rest, that
     faces it (normals opposed), has it on its outer side and shares no tet with it (the other
-    lip or lid); otherwise, the nearest bone triangle facing it, if any.
+    lip or lid), and with every bone triangle within ``radius`` facing it.
     """
 
     def __init__(self, model, free_mask, stiffness, radius=0.004):
@@ -242,14 +242,24 @@ class Collisions:
         q = self._q(self.points(X, M))
         return plane_gap(*(q[:, 3 * i:3 * i + 3] for i in range(4)), order=0) - self.rest_gap
 
-    def _active(self, X, M, order):
-        """The contacts that act (penetrating, inside their gate): (mask (c,), energy terms)."""
+    def acting(self, X, M):
+        """Which contacts act (c,) bool at positions X (N,3), jaw transform M (4,4):
+        penetrating and inside their gate."""
         Q = self.points(X, M)
         q = self._q(Q)
         gap = plane_gap(*(q[:, 3 * i:3 * i + 3] for i in range(4)), order=0) - self.rest_gap
-        r = np.linalg.norm(q[:, :3] - Q[self.tri].mean(1), axis=1)
-        m = (gap < 0) & (r < self.reach[:, 1])
-        return m, contact_energy(q[m], self.rest_gap[m], self.reach[m], self.stiffness, order)
+        return (gap < 0) & (np.linalg.norm(q[:, :3] - Q[self.tri].mean(1), axis=1) < self.reach[:, 1])
+
+    def kinds(self):
+        """Masks (c,) of the flesh-flesh, flesh-cranium and flesh-jaw contacts (a dict)."""
+        jaw = (self.tri >= self.jaw_range[0]).all(1) & (self.tri < self.jaw_range[1]).all(1)
+        return {"flesh": self.flesh, "cranium": ~self.flesh & ~jaw, "jaw": jaw}
+
+    def _active(self, X, M, order):
+        """The contacts that act: (mask (c,), their contact_energy terms)."""
+        m = self.acting(X, M)
+        q = self._q(self.points(X, M), m)
+        return m, contact_energy(q, self.rest_gap[m], self.reach[m], self.stiffness, order)
 
     def energy(self, X, M):
         """Collision energy (J) at positions X (N,3), jaw transform M (4,4)."""
@@ -283,8 +293,8 @@ class Collisions:
         the acting contacts on jaw triangles, H[x, (a,b,c)] d(a,b,c)/dj."""
         out = np.zeros((len(dM), self.n_vertices, 3))
         m, (_, _, H) = self._active(X, M, 2)
-        j0, j1 = self.jaw_range
-        on_jaw = (self.tri[m] >= j0).all(1) & (self.tri[m] < j1).all(1)
+        j0 = self.jaw_range[0]
+        on_jaw = self.kinds()["jaw"][m]
         if not on_jaw.any():
             return out
         H = H[on_jaw]

@@ -91,9 +91,9 @@ class DrivenSimulation:
 
     def result_at(self, p):
         """The DrivenResult at p: the last one when p is unchanged, else a new solve, warm
-        from the last one (``start = "last"``) or cold, from rest (``"rest"``). From rest the
-        surface is a function of p alone; from the last solve, contact planes and lip
-        contacts depend on the path of earlier solves (up to 0.1 mm apart at the same p).
+        from the last one (``start = "last"``) or cold, from rest (``"rest"``). Either way
+        the surface is a function of p alone, to the Newton tolerance (the energy is a function
+        of the state and p, sim.collisions).
 
         A warm solve at a p that was solved before and does not converge now is tried again
         from rest: a fit coming back to its accepted point after rejected trials starts from
