@@ -121,7 +121,7 @@ def test_shading_mask_restricts_the_data_term_and_its_gradient(small_expressive_
     _, grad = obj(z)
     full(z)
     assert 0 < obj.terms["image"] < full.terms["image"]
-    idx, h = m.blendshape_names.index("lipCornerPull_L"), 0.02
+    idx, h = m.blendshape_names.index("lipCornerPull_L"), 0.01
     d = np.zeros_like(z)
     d[idx] = h
     fd = (obj(z + d)[0] - obj(z - d)[0]) / (2 * h)
