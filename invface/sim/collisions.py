@@ -187,7 +187,8 @@ class Collisions:
 
         # flesh on flesh
         tri = faces[free_mask[faces].all(1)]
-        share = lambda i, f: np.any([_share_tet(tets, N, np.stack([cand[i], tri[f, k]], 1)) for k in range(3)], 0)
+        adj = _tet_adjacency(tets, N)
+        share = lambda i, f: np.any([np.asarray(adj[cand[i], tri[f, k]]).ravel() > 0 for k in range(3)], 0)
         i, f = _pairs(X0[cand], nrm[cand], X0, tri, radius, -0.5, share)
         vs, tris = [cand[i]], [tri[f]]
 
@@ -306,11 +307,10 @@ class Collisions:
         return out
 
 
-def _share_tet(tets, n_vertices, pairs):
-    """Whether each vertex pair (P,2) shares a tet."""
+def _tet_adjacency(tets, n_vertices):
+    """Sparse (N,N) matrix, nonzero where two vertices share a tet."""
     import scipy.sparse as sp
 
     rows = np.repeat(np.arange(len(tets)), 4)
     inc = sp.csr_matrix((np.ones(rows.size), (tets.reshape(-1), rows)), shape=(n_vertices, len(tets)))
-    adj = (inc @ inc.T).tocsr()
-    return np.asarray(adj[pairs[:, 0], pairs[:, 1]]).ravel() > 0
+    return (inc @ inc.T).tocsr()
