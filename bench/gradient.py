@@ -1,12 +1,16 @@
 """Derivative benchmark for the driven simulation x(w) (issue 4).
 
-    python bench/gradient.py [--resolution 1]
+    python bench/gradient.py [--resolution 1] [--fd]
 
 Prints for the template: the Poisson precompute seconds (Eq. 10-11, all K blendshapes),
 the forward solve (cold from rest and warm), the adjoint gradient of a surface loss
 (Sensitivity set-up + factorisation + one back-substitution), the full Jacobian (all K+6
 controls by tangent solves) and the gradient/forward ratio; then the same gradient for a
 model with twice as many blendshapes, to show that its cost does not grow with K.
+
+``--fd`` checks the adjoint instead (issue 25): the gradient of L(p) = sum(g * surface(p))
+(random g) against central differences of solves that each start from rest, on every control,
+at lipCornerPull_L 0.3, lipPucker 0.3, browInnerUp_L 0.2, jaw opened 0.05 rad (contacts on).
 """
 import argparse
 import copy
@@ -44,11 +48,39 @@ def gradient_seconds(ds, p, gx):
     return time.perf_counter() - t, r, g
 
 
+def finite_difference_check(model):
+    """Adjoint vs central differences of cold solves, per control (prints a table)."""
+    ds = DrivenSimulation(model)
+    p = model.parameters({"weights": {"lipCornerPull_L": 0.3, "lipPucker": 0.3, "browInnerUp_L": 0.2},
+                          "jaw": [0.05, 0, 0, 0, 0, 0]})
+    r, t = timed(lambda: ds.solve(p, warm=None, rtol=1e-10))
+    acting = ds.sim.collisions.acting(r.X, model.jaw_matrix(ds.split(p)[1]))
+    print(f"  cold solve {t:.1f} s, {acting.sum()} contacts acting")
+    gx = np.random.default_rng(0).standard_normal(model.neutral.shape)
+    g = ds.surface_vjp(p, gx)
+    vec = FitVector.of(model)
+    steps = np.full(vec.P, 1e-4)
+    steps[vec.jaw] = [1e-5, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6]
+    fd = np.zeros(vec.P)
+    for i, h in enumerate(steps):
+        e = np.zeros_like(p)
+        e[i] = h
+        L = [np.sum(gx * ds.surface_of(ds.solve(p + s * e, warm=None, rtol=1e-10))) for s in (1, -1)]
+        fd[i] = (L[0] - L[1]) / (2 * h)
+    err = np.abs(g - fd) / np.maximum(np.abs(fd), 1e-3 * np.abs(fd).max())
+    for n, a, b, e in zip(ds.parameter_names, g, fd, err):
+        print(f"    {n:24s} adjoint {a: .6e}  cold FD {b: .6e}  rel err {e:.1e}")
+    print(f"  largest relative error {err.max():.1e} ({ds.parameter_names[int(err.argmax())]})")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--resolution", type=float, default=1.0)
+    ap.add_argument("--fd", action="store_true", help="check the adjoint against cold finite differences")
     a = ap.parse_args()
     model = invface.template.build(resolution=a.resolution)
+    if a.fd:
+        return finite_difference_check(model)
     K = len(model.blendshape_names)
     print(f"template resolution {a.resolution:g}: {len(model.tets)} tets, {len(model.neutral)} surface "
           f"vertices, K = {K} blendshapes")

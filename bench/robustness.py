@@ -11,7 +11,9 @@ Cold solves (each from rest, as a freshly loaded model) of the driven simulation
   * ``--pairs``: every pair of the strongest mouth shapes (the six that move the lips most)
     and the jaw opened to its upper bound, each at its bound.
 Prints per group and in all: converged / total, the worst final relative residual, inverted
-tets, the smallest volume ratio, load steps used, seconds (median / max), and every failure.
+tets, the smallest volume ratio, load steps used, the deepest penetration of an acting contact
+(how far a flesh vertex ended up behind the surface it touches), seconds (median / max), and
+every failure or load-stepped solve.
 
 ``--model ict`` builds an actor from ../shared/data/ict-facekit's neutral with its imported
 blendshapes (``build-model --blendshapes``).
@@ -54,15 +56,12 @@ def load(name, resolution):
 
 
 def cases(model, count, singles, pairs, seed=0):
-    """(group, label, p (K+6,)) of the sweep."""
+    """(group, label, p (K+6,)) of the sweep: singles, pairs, then the quasi-random samples."""
     K = len(model.blendshape_names)
     lo = np.concatenate([np.zeros(K), JAW_LOWER])
     hi = np.concatenate([np.ones(K), JAW_UPPER])
     names = list(model.blendshape_names) + JAW_NAMES
     out = []
-    if count:
-        u = qmc.Sobol(K + 6, scramble=True, seed=seed).random(count)
-        out += [("quasi-random", f"sample {i}", lo + s * (hi - lo)) for i, s in enumerate(u)]
     if singles:
         for i, n in enumerate(names):
             p = np.zeros(K + 6)
@@ -81,6 +80,9 @@ def cases(model, count, singles, pairs, seed=0):
             for n in (a, b):
                 p[names.index(n)] = hi[names.index(n)]
             out.append(("pairs", f"{a}+{b}", p))
+    if count:
+        u = qmc.Sobol(K + 6, scramble=True, seed=seed).random(count)
+        out += [("quasi-random", f"sample {i}", lo + s * (hi - lo)) for i, s in enumerate(u)]
     return out
 
 
@@ -104,19 +106,45 @@ def main():
             r = ds.solve(p, warm=None, raise_on_failure=False).sim
         except SimulationError as e:          # a failure outside Newton (none expected)
             print(f"  {group} {label}: {e}")
+            rows.append((group, label, False, np.nan, 0, np.nan, 0, time.perf_counter() - t, 0.0))
             continue
         sec = time.perf_counter() - t
+        depth = penetration(ds.sim.collisions, r.X, model.jaw_matrix(r.jaw))
         rows.append((group, label, r.converged, r.residuals[-1] if r.residuals else np.nan, r.inverted,
-                     r.min_J, r.load_steps, sec))
+                     r.min_J, r.load_steps, sec, depth))
         if not r.converged or r.load_steps:
             print(f"  {group} {label}: {r.report()}", flush=True)
-    for group in dict.fromkeys([r[0] for r in rows] + ["all"]):
+        if len(rows) % 32 == 0:
+            print(f"  [{len(rows)} done, {time.perf_counter() - t0:.0f} s]", end=" ")
+            summary(rows, ["all"])
+    summary(rows)
+
+
+def penetration(col, X, M):
+    """Deepest penetration (m) of a flesh vertex: for each vertex with acting contacts, the gap
+    of the one whose triangle's centroid is nearest (the surface the vertex is against; a
+    farther triangle's plane extends past the surface's bends and would overstate it)."""
+    acting = np.flatnonzero(col.acting(X, M))
+    if not len(acting):
+        return 0.0
+    Q = col.points(X, M)
+    r = np.linalg.norm(Q[col.v[acting]] - Q[col.tri[acting]].mean(1), axis=1)
+    order = np.lexsort((r, col.v[acting]))
+    first = np.r_[True, np.diff(col.v[acting][order]) != 0]
+    return float(max(0.0, -col.gaps(X, M)[acting][order][first].min()))
+
+
+def summary(rows, groups=None):
+    """Print the figures per group and in all."""
+    for group in groups or dict.fromkeys([r[0] for r in rows] + ["all"]):
         g = [r for r in rows if group in ("all", r[0])]
         conv = sum(r[2] for r in g)
         sec = np.array([r[7] for r in g])
         print(f"{group}: {conv} / {len(g)} converged; worst residual {max(r[3] for r in g):.1e}; "
               f"inverted tets {sum(r[4] for r in g)}; min volume ratio {min(r[5] for r in g):.3f}; "
-              f"load-stepped {sum(r[6] > 0 for r in g)}; seconds median {np.median(sec):.1f} max {sec.max():.1f}")
+              f"load-stepped {sum(r[6] > 0 for r in g)}; deepest contact penetration "
+              f"{max(r[8] for r in g) * 1000:.2f} mm; seconds median {np.median(sec):.1f} max {sec.max():.1f}",
+              flush=True)
 
 
 if __name__ == "__main__":

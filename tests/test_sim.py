@@ -168,6 +168,25 @@ def test_jaw_open_keeps_tets_positive_and_lips_apart(sim):
     assert x[up, 1].mean() - x[lo, 1].mean() > 0.01
 
 
+def test_wide_open_jaw_starts_inside_the_energy_domain(sim):
+    """Issue 25: at the jaw's upper bound (0.6 rad, 8 mm down and forward) the lower lip
+    crushes tets with three cranium-fixed vertices against the volume barrier; the jaw-skinned
+    guess for a wider opening inverts them (a start where the energy is infinite), the solver's
+    start does not, and the warm solve from there converges."""
+    jaw = np.array([0.6, 0, 0, 0, -0.008, 0.008])
+    r = sim.solve(jaw=jaw)
+    assert r.converged and r.inverted == 0 and r.min_J < 0.05
+    wider = jaw + [0.02, 0, 0, 0, 0, 0]
+    guess = r.X + sim.model.skinned_volume(wider) - sim.model.skinned_volume(jaw)
+    fixed = sim.dof_of_vertex < 0
+    guess[fixed] = sim.constrained_positions(wider)[fixed]
+    assert (sim.elements.volumes(guess) <= 0).any()
+    start = sim._start(r.X, jaw, wider)
+    assert (sim.elements.volumes(start) > 0).all()
+    assert np.abs(start[fixed] - sim.constrained_positions(wider)[fixed]).max() < 1e-12
+    assert sim.solve(jaw=wider, warm=r).converged
+
+
 def test_contact_gap_and_energy_derivatives_match_finite_differences():
     """The plane gap of a point and a triangle and the gated penalty of a contact are C2
     functions of the 12 coordinates: gradients and Hessians against central differences."""

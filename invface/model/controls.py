@@ -144,7 +144,8 @@ class FitVector:
     def bounds(self):
         """Box (lower (size,), upper (size,)) the fits keep to: blendshape weights in [0, 1];
         the jaw within its anatomical range (``rig.JAW_LOWER``/``JAW_UPPER``: opening
-        -0.1..0.6 rad about the hinge, +-0.15 rad sideways and twist, +-8 mm translation);
+        -0.02..0.6 rad about the hinge, +-0.15 rad sideways and twist, +-8 mm translation but
+        not up);
         the rigid pose free."""
         from .rig import JAW_LOWER, JAW_UPPER
         lo, hi = np.full(self.size, -np.inf), np.full(self.size, np.inf)

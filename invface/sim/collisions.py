@@ -246,7 +246,9 @@ class Collisions:
     def acting(self, X, M):
         """Which contacts act (c,) bool at positions X (N,3), jaw transform M (4,4):
         penetrating and inside their gate."""
-        Q = self.points(X, M)
+        return self._acting(self.points(X, M))
+
+    def _acting(self, Q):
         q = self._q(Q)
         gap = plane_gap(*(q[:, 3 * i:3 * i + 3] for i in range(4)), order=0) - self.rest_gap
         return (gap < 0) & (np.linalg.norm(q[:, :3] - Q[self.tri].mean(1), axis=1) < self.reach[:, 1])
@@ -258,9 +260,9 @@ class Collisions:
 
     def _active(self, X, M, order):
         """The contacts that act: (mask (c,), their contact_energy terms)."""
-        m = self.acting(X, M)
-        q = self._q(self.points(X, M), m)
-        return m, contact_energy(q, self.rest_gap[m], self.reach[m], self.stiffness, order)
+        Q = self.points(X, M)
+        m = self._acting(Q)
+        return m, contact_energy(self._q(Q, m), self.rest_gap[m], self.reach[m], self.stiffness, order)
 
     def energy(self, X, M):
         """Collision energy (J) at positions X (N,3), jaw transform M (4,4)."""

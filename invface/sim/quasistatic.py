@@ -279,14 +279,35 @@ class Simulator:
         return res
 
     MIN_STEP = 64           # the smallest load step is 1/64 of the path from start to target
+    STALL = 20              # Newton is stalled after this many iterations without halving the residual in 5
 
     def _start(self, X, jaw_from, jaw_to):
         """Start state for jaw parameters jaw_to from a state X at jaw_from: the jaw-skinned
-        displacement added, constrained vertices exactly placed."""
-        X = X + self.model.skinned_volume(jaw_to) - self.model.skinned_volume(jaw_from)
+        displacement added, constrained vertices exactly placed.
+
+        Next to a tet the state has crushed against the volume barrier the skinned guess can
+        invert it (a start outside the energy's domain). The free vertices of such a tet are
+        moved rigidly with the jaw instead when it has jaw-fixed vertices, else kept where
+        they are, until no tet is inverted (at most 20 passes)."""
+        d = self.model.skinned_volume(jaw_to) - self.model.skinned_volume(jaw_from)
         fixed = self.dof_of_vertex < 0
-        X[fixed] = self.constrained_positions(jaw_to)[fixed]
-        return X
+        d[fixed] = self.constrained_positions(jaw_to)[fixed] - X[fixed]
+        step = self.model.jaw_matrix(jaw_to) @ np.linalg.inv(self.model.jaw_matrix(jaw_from))
+        rigid = X @ step[:3, :3].T + step[:3, 3] - X
+        on_jaw = np.zeros(len(X), bool)
+        on_jaw[self.model.fixed_jaw] = True
+        tets = self.elements.tets
+        for _ in range(20):
+            start = X + d
+            bad = tets[self.elements.volumes(start) <= 0]
+            if not len(bad):
+                break
+            jawed = np.repeat(on_jaw[bad].any(1), 4)
+            v = bad.ravel()
+            keep = ~fixed[v]
+            d[v[keep & jawed]] = rigid[v[keep & jawed]]
+            d[v[keep & ~jawed]] = 0.0
+        return start
 
     def _newton(self, X, act, jaw, tracks, rtol, max_iter, progress, secs):
         """Newton from X: (X, converged, iterations, relative residuals, energy, matrix data).
@@ -312,7 +333,7 @@ class Simulator:
                 break
             if r <= rtol * ref:
                 converged = True
-            stalled = it >= 10 and residuals[-1] > 0.5 * residuals[-6]
+            stalled = it >= self.STALL and residuals[-1] > 0.5 * residuals[-6]
             if converged or stalled or it >= max_iter:
                 break
             it += 1
