@@ -10,7 +10,8 @@ model with twice as many blendshapes, to show that its cost does not grow with K
 
 ``--fd`` checks the adjoint instead (issue 25): the gradient of L(p) = sum(g * surface(p))
 (random g) against central differences of solves that each start from rest, on every control,
-at lipCornerPull_L 0.3, lipPucker 0.3, browInnerUp_L 0.2, jaw opened 0.05 rad (contacts on).
+at lipCornerPull_L 0.3, lipPucker 0.3, browInnerUp_L 0.2, jaw opened 0.05 rad (contacts on);
+then the same controls solved warm from other states, against the cold surface.
 """
 import argparse
 import copy
@@ -71,6 +72,13 @@ def finite_difference_check(model):
     for n, a, b, e in zip(ds.parameter_names, g, fd, err):
         print(f"    {n:24s} adjoint {a: .6e}  cold FD {b: .6e}  rel err {e:.1e}")
     print(f"  largest relative error {err.max():.1e} ({ds.parameter_names[int(err.argmax())]})")
+    # path dependence: the same controls solved warm from other states reach the same surface
+    cold = ds.surface_of(r)
+    far = ds.solve(model.parameters({"weights": {"lipCornerPull_R": 0.8, "jawOpen": 0.6},
+                                     "jaw": [0.3, 0, 0, 0, -0.002, 0.002]}), warm=None)
+    for label, start in (("the last finite-difference state", "last"), ("a wide smile with the jaw open", far)):
+        d = np.linalg.norm(ds.surface_of(ds.solve(p, warm=start, rtol=1e-10)) - cold, axis=1)
+        print(f"  warm from {label}: largest surface difference to the cold solve {d.max() * 1000:.2e} mm")
 
 
 def main():

@@ -121,17 +121,22 @@ def main():
 
 
 def penetration(col, X, M):
-    """Deepest penetration (m) of a flesh vertex: for each vertex with acting contacts, the gap
-    of the one whose triangle's centroid is nearest (the surface the vertex is against; a
-    farther triangle's plane extends past the surface's bends and would overstate it)."""
+    """Deepest penetration (m) of a flesh vertex behind a surface it touches: the largest
+    negative gap of an acting contact whose vertex projects inside its triangle (a vertex off
+    to the side is behind the triangle's plane where the surface bends away, not behind the
+    surface)."""
     acting = np.flatnonzero(col.acting(X, M))
     if not len(acting):
         return 0.0
     Q = col.points(X, M)
-    r = np.linalg.norm(Q[col.v[acting]] - Q[col.tri[acting]].mean(1), axis=1)
-    order = np.lexsort((r, col.v[acting]))
-    first = np.r_[True, np.diff(col.v[acting][order]) != 0]
-    return float(max(0.0, -col.gaps(X, M)[acting][order][first].min()))
+    x, (a, b, c) = Q[col.v[acting]], np.moveaxis(Q[col.tri[acting]], 1, 0)
+    n = np.cross(b - a, c - a)
+    nn = np.einsum("ci,ci->c", n, n)
+    inside = np.ones(len(acting), bool)
+    for p, q in ((a, b), (b, c), (c, a)):            # the projection is on each edge's inner side
+        inside &= np.einsum("ci,ci->c", np.cross(q - p, x - p), n) >= -1e-12 * nn
+    gaps = col.gaps(X, M)[acting][inside]
+    return float(max(0.0, -gaps.min())) if len(gaps) else 0.0
 
 
 def summary(rows, groups=None):

@@ -221,7 +221,7 @@ class Simulator:
 
     # -- Newton -----------------------------------------------------------------------------
     def solve(self, activations=None, jaw=None, tracks=None, warm=None, rtol=1e-6,
-              max_iter=40, raise_on_failure=True, progress=None):
+              max_iter=80, raise_on_failure=True, progress=None):
         """Steady state for muscle activations (dict or (M,)), jaw parameters (6,), optional
         Tracks (Eq. 5), warm start from a previous SimResult. Returns a SimResult.
 
@@ -266,7 +266,7 @@ class Simulator:
                         out = step
                         break
                 else:
-                    h /= 2
+                    h = (t1 - t) / 2         # not h / 2: t + h may overshoot the target
         X, converged, _, residuals, E, data = out
         vols = self.elements.volumes(X) / self.elements.volume
         res = SimResult(X=X, activations=act, jaw=jaw, converged=converged, iterations=total,
@@ -279,7 +279,7 @@ class Simulator:
         return res
 
     MIN_STEP = 64           # the smallest load step is 1/64 of the path from start to target
-    STALL = 20              # Newton is stalled after this many iterations without halving the residual in 5
+    STALL = 40              # Newton is stalled after this many iterations without halving the residual in 5
 
     def _start(self, X, jaw_from, jaw_to):
         """Start state for jaw parameters jaw_to from a state X at jaw_from: the jaw-skinned
@@ -312,7 +312,7 @@ class Simulator:
     def _newton(self, X, act, jaw, tracks, rtol, max_iter, progress, secs):
         """Newton from X: (X, converged, iterations, relative residuals, energy, matrix data).
 
-        Stops early when stalled: after 10 iterations, a residual above half the one five
+        Stops early when stalled: after STALL iterations, a residual above half the one five
         iterations before (a state the line search cannot leave; load stepping takes over)."""
         jm = self.model.jaw_matrix(jaw)
         residuals, ref, data = [], None, None
