@@ -127,6 +127,27 @@ def test_centerline_length_and_activation_curve(small_model):
     assert activation_from_length(mus, 1.2 * L0)[0] == 0.0
 
 
+def test_activation_derivative_at_rest_is_the_one_into_the_box(small_expressive_model):
+    """Every muscle sits on its activation curve's break at rest (a = 0 for s >= 1). The
+    activation's derivative in each weight at 0 is the forward difference, into the box:
+    a shape that shortens a muscle activates it (the lengthening side's slope, 0, gave the
+    adjoint a 7.8 % error on browOuterUp_R at weight 0 on the default head)."""
+    from invface.model.rig import jaw_transform_derivatives
+    from invface.sim.driven import DrivenSimulation
+    m = small_expressive_model
+    ds = DrivenSimulation(m, contact=False)
+    p = np.zeros(len(ds.parameter_names))
+    b, jaw = ds.split(p)
+    jm = m.jaw_matrix(jaw)
+    st = ds.tracks.evaluate(b, jm)
+    da = ds.tracks.activation_jacobian(st, jm, jaw_transform_derivatives(jaw, m.jaw_pivot, m.jaw_frame))
+    h = 1e-6
+    fwd = np.stack([(ds.tracks.evaluate(b + h * e, jm).activations - st.activations) / h
+                    for e in np.eye(len(b))], 1)
+    assert np.abs(fwd).max() > 1.0                       # some shapes do activate muscles
+    assert np.allclose(da[:, :ds.n_blendshapes], fwd, rtol=1e-4, atol=1e-6 * np.abs(fwd).max())
+
+
 @pytest.fixture(scope="module")
 def sim(small_model):
     return Simulator(small_model)

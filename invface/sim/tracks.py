@@ -13,15 +13,27 @@ from ..errors import InvfaceError
 
 
 def activation_from_length(muscle, length):
-    """Activation a_m(L) and its slope da/dL (1/m) from the muscle's activation-length curve."""
+    """Activation a_m(L) and its slope da/dL (1/m) from the muscle's activation-length curve
+    (at a break of the piecewise-linear curve, the slope on the lengthening side)."""
+    return muscle.activation(length), activation_slopes(muscle, length)[1]
+
+
+def activation_slopes(muscle, length):
+    """One-sided slopes (da/dL on the shortening side, on the lengthening side) (1/m) of the
+    activation-length curve at ``length``; they differ only on a break of the curve, such as
+    the rest length where a muscle starts to contract (a stretch within 1e-9 of a break, the
+    round-off of a rest length recomputed, counts as on it)."""
     c = muscle.activation_curve
     L0 = muscle.rest_length
     s = np.asarray(length, float) / L0
-    a = muscle.activation(length)
+    near = np.abs(c[:, 0] - s[..., None]) < 1e-9
+    s = np.where(near.any(-1), c[np.argmax(near, -1), 0], s)
     slopes = np.diff(c[:, 1]) / np.diff(c[:, 0])
-    k = np.clip(np.searchsorted(c[:, 0], s, side="right") - 1, 0, len(slopes) - 1)
-    inside = (s > c[0, 0]) & (s < c[-1, 0])
-    return a, np.where(inside, slopes[k], 0.0) / L0
+    out = []
+    for side, inside in (("left", (s > c[0, 0]) & (s <= c[-1, 0])), ("right", (s >= c[0, 0]) & (s < c[-1, 0]))):
+        k = np.clip(np.searchsorted(c[:, 0], s, side=side) - 1, 0, len(slopes) - 1)
+        out.append(np.where(inside, slopes[k], 0.0) / L0)
+    return tuple(out)
 
 
 @dataclass
@@ -59,7 +71,8 @@ class Tracks:
 @dataclass
 class TrackState:
     """Eq. 7-9 evaluated for controls (b, j): track targets (n,3), centre-line points (P,3),
-    lengths L (M,), activations a (M,) and slopes da/dL (M,), plus the pre-skinning points."""
+    lengths L (M,), activations a (M,), the one-sided slopes da/dL (M,2) (shortening side,
+    lengthening side; see activation_slopes), plus the pre-skinning points."""
     targets: np.ndarray
     centerlines: np.ndarray
     lengths: np.ndarray
@@ -132,9 +145,9 @@ class MuscleTracks:
         C = skin(pre_c, self.centerline_weights, jaw_matrix)
         L, _ = self.lengths(C)
         a = np.zeros(self.n_muscles)
-        da = np.zeros(self.n_muscles)
+        da = np.zeros((self.n_muscles, 2))
         for i, m in enumerate(self.muscles):
-            a[i], da[i] = activation_from_length(m, L[i])
+            a[i], da[i] = m.activation(L[i]), activation_slopes(m, L[i])
         return TrackState(skin(pre_t, self.target_weights, jaw_matrix), C, L, a, da, pre_t, pre_c)
 
     def springs(self, state):
@@ -142,7 +155,10 @@ class MuscleTracks:
         return Tracks(self.vertices, state.targets, self.stiffness)
 
     def activation_jacobian(self, state, jaw_matrix, dM):
-        """da/dp (M, K+J) for p = (b, jaw), dM (J,4,4) the jaw-transform derivatives."""
+        """da/dp (M, K+J) for p = (b, jaw), dM (J,4,4) the jaw-transform derivatives: the
+        derivative in the direction of increasing p (where a muscle sits on a break of its
+        activation curve, as every muscle at rest does, the slope on the side p moves it to:
+        a weight at its lower bound 0 that shortens the muscle activates it)."""
         from ..model.rig import skin_derivatives
 
         dC = skin_derivatives(state.pre_centerlines, self.centerline_weights, jaw_matrix,
@@ -150,7 +166,7 @@ class MuscleTracks:
         _, dL = self.lengths(state.centerlines)
         per_point = np.einsum("qpi,pi->qp", dC, dL)                          # (K+J, P)
         dLdp = np.stack([np.bincount(self.owner, row, minlength=self.n_muscles) for row in per_point], 1)
-        return state.slopes[:, None] * dLdp
+        return np.where(dLdp < 0, state.slopes[:, :1], state.slopes[:, 1:]) * dLdp
 
     def target_derivatives(self, state, jaw_matrix, dM):
         """d targets / dp (K+J, n, 3)."""
