@@ -139,7 +139,7 @@ def test_real_scan_ict_neutral(small_model, tmp_path):
         trimesh.Trimesh(V + ex["deltas"][list(ex["names"]).index(name)], F, process=False).export(tmp_path / f"{name}.obj")
     model, res = build_model(ICT / "neutral.obj", blendshapes=tmp_path, template=small_model, expressions="none")
     jaw = np.array(model.meta["blendshape_jaw"]["jawOpen"])
-    assert 0.25 < jaw[0] < 0.45 and np.abs(jaw[1:]).max() < 0.02, jaw          # 19 degrees
+    assert 0.2 < jaw[0] < 0.45 and np.abs(jaw[1:]).max() < 0.02, jaw           # 14 degrees and 3.8 mm forward (the jaw may not rise)
     p = model.parameters({"weights": {"jawOpen": 1.0}, "jaw": jaw})
     target = model.surface_model("blendshape").surface(p)                       # the imported shape
     err = np.linalg.norm(model.surface_model("simulation").surface(p) - target, axis=1)
@@ -298,7 +298,7 @@ def test_jaw_split_recovers_the_skinning(small_model):
     from invface.morph.jaw import fit_jaw, is_jaw_shape, split_jaw
     m = small_model
     n, w = m.neutral, m.jaw_weights
-    j0 = np.array([0.2, 0.02, -0.01, 0.0, 0.002, 0.001])
+    j0 = np.array([0.2, 0.02, -0.01, 0.0, -0.002, 0.001])     # inside the box: the jaw drops, never rises
     assert np.allclose(fit_jaw(m, skin(n, w, m.jaw_matrix(j0)), w > 0), j0, atol=1e-7)
     far = fit_jaw(m, skin(n, w, m.jaw_matrix(j0 + [0, 0, 0, 0, 0, 0.01])), w > 0)   # 11 mm forward
     assert abs(far[5] - JAW_UPPER[5]) < 1e-9 and np.all(far >= JAW_LOWER) and np.all(far <= JAW_UPPER)
