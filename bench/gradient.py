@@ -21,7 +21,7 @@ import numpy as np
 
 import invface
 from invface.model import FitVector
-from invface.sim.adjoint import Sensitivity
+from invface.sim.adjoint import Sensitivity, cold_finite_differences
 from invface.sim.driven import DrivenSimulation
 from invface.sim.poisson import track_displacements
 
@@ -59,15 +59,7 @@ def finite_difference_check(model):
     print(f"  cold solve {t:.1f} s, {acting.sum()} contacts acting")
     gx = np.random.default_rng(0).standard_normal(model.neutral.shape)
     g = ds.surface_vjp(p, gx)
-    vec = FitVector.of(model)
-    steps = np.full(vec.P, 1e-4)
-    steps[vec.jaw] = [1e-5, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6]
-    fd = np.zeros(vec.P)
-    for i, h in enumerate(steps):
-        e = np.zeros_like(p)
-        e[i] = h
-        L = [np.sum(gx * ds.surface_of(ds.solve(p + s * e, warm=None, rtol=1e-10))) for s in (1, -1)]
-        fd[i] = (L[0] - L[1]) / (2 * h)
+    fd = cold_finite_differences(ds, p, gx)
     err = np.abs(g - fd) / np.maximum(np.abs(fd), 1e-3 * np.abs(fd).max())
     for n, a, b, e in zip(ds.parameter_names, g, fd, err):
         print(f"    {n:24s} adjoint {a: .6e}  cold FD {b: .6e}  rel err {e:.1e}")
