@@ -1,15 +1,18 @@
 """Fitting benchmark: seconds per 3D scan fit (Eq. 13) and per plate frame (Eq. 15-16) for
 both model kinds.
 
-    python bench/fit.py [--resolution 1] [--plates smile_blendshape,smile_simulation]
+    python bench/fit.py [--resolution 1 | --model FILE.npz] [--plates smile_blendshape,smile_simulation]
+                        [--no-scan]
 
 A synthetic scan is made by the model itself (random controls, 30 % of the weights active,
 jaw 0.08 rad, rotation ~0.1 rad, a few mm of translation) and fitted from the neutral start
 with lambda = 1e-8 (noise-free scan) and the paper's 1e-6. Prints seconds, dogleg
 iterations, the largest control error and the surface error.
 Plate fits: the sample plates (``fit.samples.SAMPLES``, 720x540, rendered here) with
-their curve files and the true light and albedo; prints seconds per stage and the vertex
-error against the truth (posed, and shape only), non-zero weights and lip volume change.
+their curve files and the true light and albedo; prints seconds per stage and the median
+vertex error against the truth (posed; its parts along the camera rays, depth, and across
+them, in plane; shape only), non-zero weights and lip volume change. ``--plates all``: every
+sample plate but the neutral one.
 """
 from __future__ import annotations
 
@@ -27,18 +30,20 @@ from invface.model import FitVector
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--resolution", type=float, default=1.0)
+    ap.add_argument("--model", help="a FaceModel bundle instead of the template at --resolution")
     ap.add_argument("--plates", default="smile_blendshape,smile_simulation",
                     help="sample plates to fit (comma-separated; '' skips plate fits)")
     ap.add_argument("--no-scan", action="store_true", help="skip the scan fits")
     a = ap.parse_args()
-    model = invface.template.build(resolution=a.resolution)
+    model = invface.FaceModel.load(a.model) if a.model else invface.template.build(resolution=a.resolution)
     vec = FitVector.of(model)
     rng = np.random.default_rng(0)
     p = vec.controls_vector(np.where(rng.random(vec.K) < 0.3, rng.uniform(0.2, 0.8, vec.K), 0), [0.08, 0, 0, 0, 0, 0])
     rot, tr = np.array([0.05, -0.1, 0.02]), np.array([0.003, -0.002, 0.005])
     print(f"head: {len(model.neutral)} vertices, {len(model.tets)} tets, K = {vec.K}")
     if a.plates:
-        plates(model, a.plates.split(","))
+        from invface.fit.samples import SAMPLES
+        plates(model, [n for n in SAMPLES if n != "neutral"] if a.plates == "all" else a.plates.split(","))
     if a.no_scan:
         return
     print(f"{'model':>11} {'lambda':>7} {'seconds':>8} {'its':>4} {'max |dp|':>9} {'max err mm':>10}")
@@ -64,13 +69,13 @@ def plates(model, names):
 
     from invface.fit.calibrate import Calibration
     from invface.fit.curves import read_curves
-    from invface.fit.plate import fit_plate, read_truth, vertex_errors
+    from invface.fit.plate import depth_errors, fit_plate, read_truth, vertex_errors
     from invface.render.plates import load_plate
     from invface.fit.samples import write_sample_plates
     from invface.render.synthetic import skin_albedo, studio_light
     cal = Calibration(gamma=studio_light(), albedo=skin_albedo(model))
     print(f"{'plate':>18} {'model':>11} {'curves s':>8} {'shading s':>9} {'total s':>8} "
-          f"{'posed mm':>8} {'shape mm':>8} {'max mm':>7} {'weights':>7} {'lip vol':>8}")
+          f"{'posed mm':>8} {'depth mm':>8} {'plane mm':>8} {'shape mm':>8} {'max mm':>7} {'weights':>7} {'lip vol':>8}")
     with tempfile.TemporaryDirectory() as tmp:
         for path in write_sample_plates(model, tmp, names=names):
             plate = load_plate(path)
@@ -80,9 +85,11 @@ def plates(model, names):
                 model._surface_models.clear()
                 fit = fit_plate(model, plate, cal, curves, kind=kind)
                 posed, shape = vertex_errors(model, fit, *truth)
+                depth, across = depth_errors(fit.surface, truth[0], plate.camera)
                 sh = sum(v for k, v in fit.seconds.items() if k.startswith("shading"))
                 print(f"{path.stem:>18} {kind:>11} {fit.seconds['curves']:8.1f} {sh:9.1f} "
-                      f"{fit.seconds['total']:8.1f} {np.median(posed) * 1000:8.3f} {np.median(shape) * 1000:8.3f} "
+                      f"{fit.seconds['total']:8.1f} {np.median(posed) * 1000:8.3f} {np.median(depth) * 1000:8.3f} "
+                      f"{np.median(across) * 1000:8.3f} {np.median(shape) * 1000:8.3f} "
                       f"{shape.max() * 1000:7.2f} {fit.nonzero_weights:7d} "
                       f"{100 * fit.lip_volume_change:+7.2f}%", flush=True)
 

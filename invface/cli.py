@@ -166,6 +166,8 @@ def _calibrate(model, plate, out, max_iter, pose=None, curves=None, source="", l
         bar.close()
     path, compare = result.save(out)
     print(f"{result.describe()}\nwrote {path} and {compare} (plate | render | 4x difference)")
+    for w in result.warnings():
+        print(f"warning: {w}", flush=True)
     return result
 
 
@@ -210,7 +212,7 @@ def cmd_fit_scan(args):
     bar = _bar(f"fit {args.model_kind} model to scan")
     try:
         result = fit_scan(args.scan, model, kind=args.model_kind, mode=args.mode, lam=args.lam,
-                          max_iter=args.max_iter,
+                          max_iter=args.max_iter, unit=args.unit,
                           progress=lambda h: (bar.update(1), bar.set_postfix(cost=f"{h['cost']:.3g}")))
     finally:
         bar.close()
@@ -221,7 +223,7 @@ def cmd_fit_scan(args):
     return 0
 
 
-def _fit_frames(model, frames, cal, kinds, out, options, curves=None):
+def _fit_frames(model, frames, cal, kinds, out, options, curves=None, force=False):
     """``pipeline.fit_sequence`` with bars, a line per finished kind and the report paths."""
     from .pipeline import fit_sequence
     bars = _FitBars()
@@ -232,13 +234,15 @@ def _fit_frames(model, frames, cal, kinds, out, options, curves=None):
 
     def frame_done(frame, folder):
         bars.close()
+        for w in frame.warnings:
+            print(f"warning: {w}", flush=True)
         for kind, why in frame.failed.items():
             print(f"{frame.name} {kind}: did not finish: {why}", flush=True)
         if frame.fits:
             print(f"report: {folder / 'index.html'}")
     try:
         results = fit_sequence(model, frames, cal, out, kinds, curves, progress=bars, on_kind=kind_done,
-                               on_frame=frame_done, **options)
+                               on_frame=frame_done, force=force, **options)
     finally:
         bars.close()
     if len(frames) > 1:
@@ -252,11 +256,13 @@ def cmd_fit_plate(args):
     """Fit controls and pose to a plate, or to each frame of a folder (sequence mode)."""
     from .fit.calibrate import Calibration
     from .pipeline import as_plate, find_curves, model_kinds, plate_frames
+    from .pipeline.plates import start_run
     if args.iterations < 0:
         raise InvfaceError(f"--iterations {args.iterations}: give 0 or more shape-from-shading iterations")
     model = _load_model(args.model, args.resolution)
     frames = plate_frames(args.plate)
     out = Path(args.output) if args.output else Path("reports") / "fit-plate" / Path(args.plate).stem
+    start_run(out, [], model_kinds(args.model_kind), args.force)     # refused before any work is done
     if args.calib:
         cal = Calibration.load(args.calib, vertex_count=len(model.neutral))
     else:
@@ -264,10 +270,10 @@ def cmd_fit_plate(args):
         curves, source = find_curves(model, first, args.curves)
         print(f"no --calib: calibrating light and albedo on {Path(frames[0]).name} itself (Eq. 14)", flush=True)
         cal = _calibrate(model, first, out / "calib.npz", 30, curves=curves, source=source,
-                         lam_curves=args.curve_lambda).calibration
+                         lam_curves=args.curve_lambda)          # its warnings go into the fit's notes
     options = dict(iterations=args.iterations, shading=not args.no_shading, lam_curves=args.curve_lambda,
                    solver=args.solver, camera=args.camera)
-    _fit_frames(model, frames, cal, model_kinds(args.model_kind), out, options, curves=args.curves)
+    _fit_frames(model, frames, cal, model_kinds(args.model_kind), out, options, curves=args.curves, force=args.force)
     return 0
 
 
@@ -318,7 +324,7 @@ def _demo_fit(model, out):
                      pose=(truth["rotation"], truth["translation"])).calibration
     print("fitting the smile plate (made by the muscle simulation) with both models", flush=True)
     _fit_frames(model, [smile], cal, ("blendshape", "simulation"), out / "fit-smile",
-                {"title": "invface demo: a simulation-made smile fitted by both models"})
+                {"title": "invface demo: a simulation-made smile fitted by both models"}, force=True)
 
 
 CURVE_LAMBDA_HELP = ("weight regulariser lambda_1 of the curve fit, Eq. 15 (px^2; default: the paper's 3600 "
@@ -375,7 +381,8 @@ def build_parser():
     c.add_argument("-o", "--output", default="calib.npz", help="calibration file to write (.npz)")
     c.set_defaults(func=cmd_calibrate)
     fs = sub.add_parser("fit-scan", help="fit controls and rigid pose to a 3D scan (Eq. 13)")
-    fs.add_argument("scan", help="scan mesh (OBJ/PLY, metres, model frame: +Y up, face along +Z)")
+    fs.add_argument("scan", help="scan mesh (OBJ/PLY, model frame: +Y up, face along +Z)")
+    fs.add_argument("--unit", choices=["m", "cm", "mm"], help="the scan's unit (default: found from its size)")
     fs.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
     fs.add_argument("--resolution", type=float, default=1.0, help="template size factor when no --model")
     fs.add_argument("--model-kind", choices=["blendshape", "simulation"], default="blendshape")
@@ -402,6 +409,7 @@ def build_parser():
                     help="shape-from-shading solver: the paper's dogleg (Gauss-Newton on forward-mode "
                          "image Jacobians) or L-BFGS-B on adjoint gradients (for many controls)")
     fp.add_argument("--no-shading", action="store_true", help="curves only (Eq. 15)")
+    fp.add_argument("--force", action="store_true", help="replace an earlier run's fits in the output folder")
     fp.add_argument("-o", "--output", help="report folder (default reports/fit-plate/PLATE)")
     fp.set_defaults(func=cmd_fit_plate)
     rp = sub.add_parser("report", help="(re)write the HTML report of a fit folder")

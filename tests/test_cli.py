@@ -2,6 +2,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 import trimesh
 
 from conftest import SMALL_RESOLUTION
@@ -110,6 +111,18 @@ def test_fit_scan_command(small_expressive_model, tmp_path):
     fit = json.loads((tmp_path / "out" / "fit.json").read_text())
     assert abs(fit["weights"]["lipCornerPull_L"] - 0.6) < 1e-3 and fit["error_mm"]["max"] < 0.01
     assert (tmp_path / "out" / "fitted.ply").exists()
+    assert fit["scan_unit"] == "m" and "scan unit: m (found from its size)" in r.stdout
+    # the same scan in millimetres: found, said, and fitted as well (was 82 m off, exit 0)
+    trimesh.Trimesh(x * 1000, m.triangles, process=False).export(tmp_path / "scan_mm.ply")
+    r = run("fit-scan", str(tmp_path / "scan_mm.ply"), "--resolution", str(SMALL_RESOLUTION),
+            "--lam", "1e-8", "-o", str(tmp_path / "out_mm"))
+    assert r.returncode == 0, r.stderr
+    assert "scan unit: mm (found from its size)" in r.stdout
+    fit = json.loads((tmp_path / "out_mm" / "fit.json").read_text())
+    assert fit["scan_unit"] == "mm" and fit["error_mm"]["max"] < 0.01
+    trimesh.Trimesh(x * 1e5, m.triangles, process=False).export(tmp_path / "scan_huge.ply")
+    r = run("fit-scan", str(tmp_path / "scan_huge.ply"), "--resolution", str(SMALL_RESOLUTION))
+    assert r.returncode == 2 and "scan_huge.ply" in r.stderr and "no head size" in r.stderr
     (tmp_path / "junk.ply").write_bytes(b"not a mesh at all")
     r = run("fit-scan", str(tmp_path / "junk.ply"), "--resolution", str(SMALL_RESOLUTION))
     assert r.returncode == 2 and "junk.ply" in r.stderr and "Traceback" not in r.stderr
@@ -234,3 +247,64 @@ def test_report_names_a_truncated_fit_file_and_negative_iterations_are_refused(t
     assert str(tmp_path) in r.stderr and "truncated or corrupt" in r.stderr, r.stderr
     r = run("fit-plate", str(tmp_path / "fit.json"), "--iterations", "-1")
     assert r.returncode == 2 and "--iterations -1" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_implausible_plate_inputs_are_refused_or_flagged(small_expressive_model, tmp_path, monkeypatch, capsys):
+    """Curves off the plate: refused. One curve: fitted, with a warning printed and in
+    fit.json. A folder with an earlier run: refused without --force, replaced with it. A run
+    stopped after one kind: the report says which kind is missing."""
+    import json
+
+    from invface.cli import main
+    from invface.fit.calibrate import Calibration
+    from invface.fit.samples import write_sample_plates
+    from invface.render.synthetic import skin_albedo, studio_light
+    m = small_expressive_model
+    path, = write_sample_plates(m, tmp_path / "plates", names=["smile_blendshape"], size=(240, 180))
+    Calibration(gamma=studio_light(), albedo=skin_albedo(m)).save(tmp_path / "calib.npz")
+    curves = json.loads(path.with_name("smile_blendshape.curves.json").read_text())["curves"]
+    args = [str(path), "--calib", str(tmp_path / "calib.npz"), "--resolution", str(SMALL_RESOLUTION), "--no-shading"]
+
+    (tmp_path / "far.json").write_text(json.dumps({"curves": {n: (np.array(c) * 10).tolist() for n, c in curves.items()}}))
+    assert main(["fit-plate", *args, "--curves", str(tmp_path / "far.json"), "-o", str(tmp_path / "far")]) == 2
+    err = capsys.readouterr().err
+    assert "lies outside the 240x180 plate" in err and "far.json" in err, err
+
+    (tmp_path / "one.json").write_text(json.dumps({"curves": {"lip_outer_upper": curves["lip_outer_upper"]}}))
+    assert main(["fit-plate", *args, "--curves", str(tmp_path / "one.json"), "-o", str(tmp_path / "one")]) == 0
+    assert "warning: " in capsys.readouterr().out
+    fit = json.loads((tmp_path / "one/blendshape/fit.json").read_text())
+    assert len(fit["warnings"]) == 1 and "1 facial feature(s) (lips)" in fit["warnings"][0]
+    assert "pose from them is uncertain" in (tmp_path / "one/index.html").read_text()
+
+    assert main(["fit-plate", *args, "-o", str(tmp_path / "one")]) == 2
+    assert "holds an earlier run's fits" in capsys.readouterr().err
+    assert main(["fit-plate", *args, "-o", str(tmp_path / "one"), "--force"]) == 0
+    assert json.loads((tmp_path / "one/blendshape/fit.json").read_text())["warnings"] == []
+
+    import invface.fit.plate as plate_module
+    real = plate_module.fit_plate
+
+    def stopped(model, plate, calibration, curves, kind="blendshape", **options):
+        if kind == "simulation":
+            raise KeyboardInterrupt
+        return real(model, plate, calibration, curves, kind=kind, **options)
+    monkeypatch.setattr(plate_module, "fit_plate", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        main(["fit-plate", *args, "--model-kind", "both", "-o", str(tmp_path / "stop")])
+    assert main(["report", str(tmp_path / "stop")]) == 0
+    page = (tmp_path / "stop/index.html").read_text()
+    assert "No simulation model fit here (the run stopped before it finished)." in page
+
+
+def test_calibrate_refuses_a_black_plate_and_flags_noise(small_expressive_model, tmp_path):
+    from invface.render.plates import write_image
+    write_image(tmp_path / "black.png", np.zeros((90, 120, 3), np.float32))
+    r = run("calibrate", str(tmp_path / "black.png"), "--resolution", str(SMALL_RESOLUTION), "--max-iter", "2",
+            "-o", str(tmp_path / "c.npz"))
+    assert r.returncode == 2 and "black.png" in r.stderr and "black" in r.stderr and "Traceback" not in r.stderr
+    write_image(tmp_path / "noise.png", np.random.default_rng(0).random((90, 120, 3)).astype(np.float32))
+    r = run("calibrate", str(tmp_path / "noise.png"), "--resolution", str(SMALL_RESOLUTION), "--max-iter", "5",
+            "-o", str(tmp_path / "c.npz"))
+    assert r.returncode == 0, r.stderr
+    assert "warning: noise.png: the calibration's pixel RMS is" in r.stdout, r.stdout

@@ -128,6 +128,43 @@ def test_shading_mask_restricts_the_data_term_and_its_gradient(small_expressive_
     assert grad[idx] == pytest.approx(fd, rel=0.05)
 
 
+def test_background_plate_fills_the_head_with_what_is_around_it(small_expressive_model):
+    """The shading fit's backplate: the head's pixels filled from the background around them."""
+    from invface.render.backplate import background_plate, head_silhouette
+    m = small_expressive_model
+    cam = _cam(200, 150)
+    p, (x, xr) = _truth(m)
+    bg = np.array([0.18, 0.2, 0.22], np.float32)
+    image, alpha = render_plate(m, x, cam, studio_light(), skin_albedo(m), ROT, TR, spp=16, background=bg,
+                                noise=0.005)
+    covered = head_silhouette(cam, xr, m.triangles)
+    assert (covered & alpha).sum() / (covered | alpha).sum() > 0.95        # the render's own outline
+    back = background_plate(image, covered)
+    assert np.abs(image[covered] - bg).mean() > 0.1                        # the plate has the face there
+    assert np.abs(back[covered] - bg).max() < 0.025                        # the backplate the background
+    np.testing.assert_array_equal(back[:5, :5], image[:5, :5])             # away from the head: the plate
+
+
+def test_shading_image_term_is_lowest_at_the_true_depth(small_expressive_model):
+    """With the plate itself behind the head the image term was lowest 1-2 mm behind the
+    true depth on the sample smile plate (issue 26); with the filled-in backplate that
+    ``fit_shading`` makes it is lowest at the truth."""
+    from invface.render.backplate import background_plate, head_silhouette
+    m = small_expressive_model
+    cam = _cam(320, 240)
+    p, (x, xr) = _truth(m)
+    g, a = studio_light(), skin_albedo(m)
+    image, mask = render_plate(m, x, cam, g, a, ROT, TR, spp=32, noise=0.005)
+    back = background_plate(image, head_silhouette(cam, xr, m.triangles))
+    obj = ShadingObjective(m, m.surface_model("blendshape"), cam, image, g, a, p, mask=mask, backplate=back)
+    vec = FitVector.of(m)
+    cost = {}
+    for dz in (-2, -1, 0, 1, 2):
+        obj(vec.pack(p, ROT, TR + [0, 0, dz * 1e-3]))
+        cost[dz] = obj.terms["image"]
+    assert min(cost, key=cost.get) == 0, cost
+
+
 @pytest.mark.parametrize("solver", ["dogleg", "lbfgs"])
 def test_fit_plate_recovers_a_blendshape_plate(small_expressive_model, tmp_path, solver):
     m = small_expressive_model

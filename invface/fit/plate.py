@@ -70,7 +70,9 @@ class PlateFit(NamedControls):
                 "nonzero_weights": self.nonzero_weights,
                 "activations": {k: round(v, 6) for k, v in self.activations.items()},
                 "active_muscles": int(sum(v > 1e-2 for v in self.activations.values())),
-                "curve_rms_px": self.curve_rms_px, "image_rms": self.image_rms,
+                "curve_rms_px": self.curve_rms_px,
+                "curve_rms_px_by_curve": {k: rms_px({k: v}) for k, v in sorted(self.residual_px.items())},
+                "image_rms": self.image_rms,
                 "lip_volume_change": self.lip_volume_change, "seconds": self.seconds,
                 "history": self.history}
 
@@ -201,3 +203,14 @@ def vertex_errors(model, fit, truth_surface, truth):
     shape = np.linalg.norm(unpose_points(fit.surface, fit.rotation, fit.translation)
                            - unpose_points(truth_surface, truth["rotation"], truth["translation"]), axis=1)
     return posed, shape
+
+
+def depth_errors(surface, truth_surface, camera):
+    """The posed error split along the camera rays (V,) m, the depth a single view hardly
+    sees, and across them (V,) m, in the image plane: for each vertex the component of
+    surface - truth_surface along the ray from the camera centre to the truth vertex."""
+    d = np.asarray(surface, float) - truth_surface
+    ray = truth_surface - camera.center
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    along = np.einsum("vi,vi->v", d, ray)
+    return np.abs(along), np.linalg.norm(d - along[:, None] * ray, axis=1)

@@ -9,9 +9,12 @@ per-pixel RGB differences between the plate F* and the render F (linear light), 
 c are the calibration's (Eq. 14), E_1 the curve distances of Eq. 15 (pixels; optional) and
 w^ the curve solution that starts the solve. The rigid pose is solved too. The plate is the
 renderer's backplate, so the background around the face is the plate's own and silhouette
-derivatives see it. A plate mask M (the alpha channel, or the landmark detector's face oval
-on a photo) restricts the data term to the face: E_2 = G(M * (F* - F)), so hair and
-background the model's scalp and neck happen to cover do not pull on the pose.
+derivatives see it; ``fit_shading`` first fills the pixels the head covers at the start
+from the background around them (``render.backplate``: with the plate itself behind the
+head, the fit pulled the head 1-2 mm away from the camera). A plate mask M (the alpha
+channel, or the landmark detector's face oval on a photo) restricts the data term to the
+face: E_2 = G(M * (F* - F)), so hair and background the model's scalp and neck happen to
+cover do not pull on the pose.
 
 Two solvers. The default is the paper's dogleg (``fit.dogleg``) on the Gauss-Newton normal
 equations: g = J^T r exactly, from one backward pass through the render (the image adjoint
@@ -35,6 +38,7 @@ import numpy as np
 
 from ..errors import ImageError, InvfaceError, SimulationError
 from ..model.controls import FitVector
+from ..render.backplate import background_plate, head_silhouette
 from ..render.renderer import FaceRenderer
 from .curves import CurveObjective
 from .lambdas import EQ16_LAMBDA_1, EQ16_LAMBDA_2
@@ -117,7 +121,7 @@ class ShadingObjective:
 
     def __init__(self, model, surface_model, camera, plate, gamma, albedo, p_hat, curves=None,
                  lam1=EQ16_LAMBDA_1, lam2=EQ16_LAMBDA_2, mask=None, spp=8, silhouette_spp=0.5, seed=1, window=None,
-                 jacobian_spp=2):
+                 jacobian_spp=2, backplate=None):
         import drjit as dr
         self.dr = dr
         self.model, self.sm = model, surface_model
@@ -135,7 +139,7 @@ class ShadingObjective:
         self.target = self.G(self.plate * self.mask)
         self.gamma, self.albedo = np.asarray(gamma, float), np.asarray(albedo, float)
         self.renderer = FaceRenderer(model.triangles, camera, spp=spp, silhouette_spp=silhouette_spp,
-                                     seed=seed, backplate=plate, crop=window)
+                                     seed=seed, backplate=plate if backplate is None else backplate, crop=window)
         self.p_hat, self.lam1, self.lam2 = np.asarray(p_hat, float), lam1, lam2
         self.jacobian_spp = int(jacobian_spp)
         self.curves = CurveObjective(model, surface_model, camera, curves, 0.0) if curves else None
@@ -309,11 +313,15 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     backward pass per evaluation, for parameter counts where K+12 forward passes are too
     many); max_iter: iterations of either; ftol: the dogleg stops after a step that lowers
     the cost by less than this fraction. ``render`` options go to ``ShadingObjective`` (spp,
-    silhouette_spp, seed, jacobian_spp). Returns a ShadingFit."""
+    silhouette_spp, seed, jacobian_spp, backplate: default the plate with the head filled in
+    from its surroundings). Returns a ShadingFit."""
     from .dogleg import dogleg
     sm, vec = model.surface_model(kind), FitVector.of(model)
     z0 = vec.pack(p_hat if p0 is None else p0, rotation, translation)
-    window = face_window(camera, posed_surface(sm, z0, vec)[1])
+    xr0 = posed_surface(sm, z0, vec)[1]
+    window = face_window(camera, xr0)
+    if "backplate" not in render:
+        render["backplate"] = background_plate(plate, head_silhouette(camera, xr0, model.triangles))
     obj = ShadingObjective(model, sm, camera, plate, gamma, albedo, p_hat, curves, lam1, lam2, mask,
                            window=window, **render)
     # one unit of the optimiser's variables (``FitVector.scales``): the balance evens out the

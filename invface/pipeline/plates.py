@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvfaceError, SimulationError
+from ..fit.curves import rms_px
 from ..fit.lambdas import EQ14_LAMBDA, EQ15_LAMBDA_1, face_scale
 
 PLATE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr")
@@ -66,23 +67,28 @@ def plate_frames(source):
 def find_curves(model, plate, curves=None):
     """The plate's curves and where they came from: ``curves`` ({name: (n, 2) px}, or a curve
     file), else PLATE.curves.json beside the plate, else the landmark detector (whose face
-    oval then becomes the plate's mask when it has none). Returns ({name: (n, 2) px}, source)."""
-    from ..fit.curves import read_curves
+    oval then becomes the plate's mask when it has none). Curves mostly outside the plate are
+    an InvfaceError (``fit.curves.check_curves``). Returns ({name: (n, 2) px}, source)."""
+    from ..fit.curves import check_curves, read_curves
     from ..fit.landmarks import curves_from_landmarks, detect_landmarks, face_mask
     from ..render.plates import linear_to_srgb
     if isinstance(curves, dict):
-        return {k: np.asarray(v, float) for k, v in curves.items()}, "given"
-    path = Path(plate.path) if plate.path else None
-    if curves is None and path is not None:
-        side = path.with_name(path.stem + ".curves.json")
-        if side.is_file():
-            curves = side
-    if curves is not None:
-        return read_curves(curves, model, image_size=plate.camera.size), str(curves)
-    points = detect_landmarks(linear_to_srgb(plate.image), name=str(path or "plate"))
-    if plate.mask is None:
-        plate.mask = face_mask(points, *plate.image.shape[:2])
-    return curves_from_landmarks(points), DETECTOR
+        found, source = {k: np.asarray(v, float) for k, v in curves.items()}, "given"
+    else:
+        path = Path(plate.path) if plate.path else None
+        if curves is None and path is not None:
+            side = path.with_name(path.stem + ".curves.json")
+            if side.is_file():
+                curves = side
+        if curves is not None:
+            found, source = read_curves(curves, model, image_size=plate.camera.size), str(curves)
+        else:
+            points = detect_landmarks(linear_to_srgb(plate.image), name=str(path or "plate"))
+            if plate.mask is None:
+                plate.mask = face_mask(points, *plate.image.shape[:2])
+            found, source = curves_from_landmarks(points), DETECTOR
+    check_curves(found, plate.camera.size, source)          # curves off the plate: an error
+    return found, source
 
 
 def curve_lambda(curves, lam=None):
@@ -166,7 +172,32 @@ class PlateCalibration:
     def describe(self):
         c = self.calibration
         return (f"calibrated in {len(c.history)} iterations, {self.seconds:.1f} s: pixel RMS {self.rms:.4f} "
-                f"(linear), light DC {c.gamma[0].round(3).tolist()}")
+                f"(linear; {self.relative_rms:.2f} of the plate's mean), light DC {c.gamma[0].round(3).tolist()}")
+
+    @property
+    def relative_rms(self):
+        """The pixel RMS over the plate's mean value (inside its mask)."""
+        img = self.plate.image if self.plate.mask is None else self.plate.image[np.asarray(self.plate.mask, bool)]
+        return self.rms / max(float(np.mean(img)), 1e-6)
+
+    #: pixel RMS over the mean plate value inside the mask above which a calibration is
+    #: flagged (sample plates 0.02-0.03, the real photos 0.2-0.3, a noise image 0.6)
+    MAX_RELATIVE_RMS = 0.45
+
+    def warnings(self):
+        """Why this calibration may not be a face's: its light is black, or its residual is far
+        above a face's (relative pixel RMS above ``MAX_RELATIVE_RMS``). A list of strings."""
+        name = Path(self.plate.path).name if self.plate.path else "plate"
+        out = []
+        if float(np.max(self.gamma[0])) <= 1e-3:
+            out.append(f"{name}: the calibrated light is black (DC {self.gamma[0].round(4).tolist()}): "
+                       "no lit face was found at the given pose")
+        rel = self.relative_rms
+        if rel > self.MAX_RELATIVE_RMS:
+            out.append(f"{name}: the calibration's pixel RMS is {rel:.2f} of the plate's mean value (a face's is "
+                       f"below {self.MAX_RELATIVE_RMS}): the head is probably not where the pose puts it, or "
+                       "the plate shows no face")
+        return out
 
 
 def calibrate_plate(model, plate, rotation=None, translation=None, shape=None, lam=EQ14_LAMBDA, max_iter=30,
@@ -176,6 +207,8 @@ def calibrate_plate(model, plate, rotation=None, translation=None, shape=None, l
     ``shape`` (V, 3) m (default the neutral). progress: each iteration's log entry.
     Returns a PlateCalibration."""
     from ..fit.calibrate import calibrate
+    from ..fit.plate import check_plate
+    check_plate(plate.image, plate.path)
     t0 = time.perf_counter()
     shape = model.neutral if shape is None else np.asarray(shape, float)
     cal = calibrate(model.triangles, shape, plate.image, plate.camera, rotation, translation, lam=lam,
@@ -195,17 +228,23 @@ def auto_calibrate(model, plate, curves, source="given", lam_curves=None, lam=No
                            progress=progress)
 
 
-def score_against_truth(model, fit, truth_path):
+def score_against_truth(model, fit, truth_path, camera=None):
     """A fit's error against a synthetic plate's ground truth (``PLATE.truth.json``):
-    ({file, made_by, median_mm, max_mm, shape_median_mm, shape_max_mm}, posed per-vertex
-    error (V,) m). Posed: what the camera sees, including the monocular depth error; shape:
-    both surfaces unposed."""
-    from ..fit.plate import read_truth, vertex_errors
+    ({file, made_by, median_mm, max_mm, shape_median_mm, shape_max_mm, and with the plate's
+    camera depth_median_mm, in_plane_median_mm}, posed per-vertex error (V,) m). Posed: what
+    the camera sees, including the monocular depth error; depth and in-plane: the posed
+    error along and across the camera rays; shape: both surfaces unposed."""
+    from ..fit.plate import depth_errors, read_truth, vertex_errors
     truth_surface, truth = read_truth(truth_path, model)
     posed, shape = vertex_errors(model, fit, truth_surface, truth)
-    return ({"file": str(truth_path), "made_by": truth["kind"], "median_mm": float(np.median(posed) * 1000),
+    score = {"file": str(truth_path), "made_by": truth["kind"], "median_mm": float(np.median(posed) * 1000),
              "max_mm": float(posed.max() * 1000), "shape_median_mm": float(np.median(shape) * 1000),
-             "shape_max_mm": float(shape.max() * 1000)}, posed)
+             "shape_max_mm": float(shape.max() * 1000)}
+    if camera is not None:
+        depth, across = depth_errors(fit.surface, truth_surface, camera)
+        score.update(depth_median_mm=float(np.median(depth) * 1000),
+                     in_plane_median_mm=float(np.median(across) * 1000))
+    return score, posed
 
 
 def truth_beside(plate):
@@ -235,6 +274,7 @@ class FrameFit:
     vertex_error: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
     title: str | None = None
     written: dict = field(default_factory=dict, repr=False)    # (folder, kind) -> failures then
 
@@ -252,6 +292,8 @@ class FrameFit:
             extra["notes"].insert(0, "Curves from the automatic landmark detector (MediaPipe Face Landmarker); "
                                      "its face oval masks the shading term.")
         extra["notes"] += [f"The {k} model's fit did not finish: {why}" for k, why in self.failed.items()]
+        extra["notes"] += [f"Warning: {w}" for w in self.warnings]
+        extra["warnings"] = list(self.warnings)
         if kind in self.truth:
             extra["truth"] = self.truth[kind]
         return extra
@@ -263,13 +305,16 @@ class FrameFit:
     def describe(self, kind):
         """One line on the kind's fit."""
         fit = self.fits[kind]
-        line = (f"{self.name} {kind}: {fit.seconds['total']:.1f} s, curves {fit.curve_rms_px:.2f} px RMS, "
+        worst = max(fit.residual_px, key=lambda k: rms_px({k: fit.residual_px[k]}), default=None)
+        line = (f"{self.name} {kind}: {fit.seconds['total']:.1f} s, curves {fit.curve_rms_px:.2f} px RMS"
+                + (f" (worst {worst} {rms_px({worst: fit.residual_px[worst]}):.2f})" if worst else "") + ", "
                 f"image RMS {fit.image_rms:.4f}, {fit.nonzero_weights} non-zero weights, "
                 f"lip volume {100 * fit.lip_volume_change:+.2f} %")
         if kind in self.truth:
             t = self.truth[kind]
-            line += (f"; vertex error vs truth: median {t['median_mm']:.3f} mm posed, "
-                     f"{t['shape_median_mm']:.3f} mm shape")
+            line += (f"; vertex error vs truth: median {t['median_mm']:.3f} mm posed"
+                     + (f" ({t['depth_median_mm']:.3f} depth, {t['in_plane_median_mm']:.3f} in plane)"
+                        if "depth_median_mm" in t else "") + f", {t['shape_median_mm']:.3f} mm shape")
         return line
 
     def save_kind(self, folder, kind):
@@ -304,14 +349,17 @@ def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), sta
     plate path (see ``render.plates.load_plate``). A kind whose simulation cannot reach an
     equilibrium is recorded in ``FrameFit.failed`` and the other kinds go on. Returns a
     FrameFit."""
+    from ..fit.curves import check_curves
     from ..fit.plate import fit_plate
     plate = as_plate(plate, camera)
-    calibration = getattr(calibration, "calibration", calibration)
+    checked, calibration = calibration, getattr(calibration, "calibration", calibration)
     curves, found = find_curves(model, plate, curves)
     source = source or found
     lam = curve_lambda(curves, lam_curves)
     frame = FrameFit(model=model, plate=plate, curves=curves, source=source, notes=list(notes), title=title,
-                     options={"curve_lambda": lam, "solver": solver})
+                     options={"curve_lambda": lam, "solver": solver},
+                     warnings=check_curves(curves, plate.camera.size, source)
+                     + (checked.warnings() if isinstance(checked, PlateCalibration) else []))
     truth = truth_beside(plate)
     for kind in model_kinds(kinds):
         def log(h, kind=kind):
@@ -326,25 +374,29 @@ def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), sta
             continue
         frame.fits[kind] = fit
         if truth is not None:
-            frame.truth[kind], frame.vertex_error[kind] = score_against_truth(model, fit, truth)
+            frame.truth[kind], frame.vertex_error[kind] = score_against_truth(model, fit, truth, plate.camera)
         if on_kind is not None:
             on_kind(frame, kind)
     return frame
 
 
 def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), curves=None, progress=None,
-                 on_kind=None, on_frame=None, **options):
+                 on_kind=None, on_frame=None, force=False, **options):
     """Fit plates in order, each warm-started from the previous frame's controls and pose
     (``fit_frame`` options: camera, iterations, shading, lam_curves, solver, title, notes).
     frames: plate paths, or a folder (``plate_frames``); curves: for a single plate only (a
     sequence takes FRAME.curves.json beside each frame, or the detector); out: each kind of
     each frame is written as it finishes, to out/ for one plate or out/<frame name>/ for
-    several, with its report page, and the sequence page out/index.html; on_kind(frame,
-    kind) and on_frame(frame, folder) are called as they finish. Returns [FrameFit]."""
+    several, with its report page, and the sequence page out/index.html; an out folder with
+    an earlier run's fits is refused unless ``force`` (``start_run``); on_kind(frame, kind)
+    and on_frame(frame, folder) are called as they finish. Returns [FrameFit]."""
     frames = plate_frames(frames) if isinstance(frames, (str, Path)) else list(frames)
     if curves is not None and len(frames) > 1:
         raise InvfaceError("one curves file names one plate; in a sequence put FRAME.curves.json beside each "
                            "frame (or let the detector find each frame's curves)")
+    kinds = model_kinds(kinds)
+    if out is not None:
+        start_run(out, [Path(f).stem for f in frames] if len(frames) > 1 else [], kinds, force)
     results, starts = [], None
     for i, path in enumerate(frames):
         folder = None if out is None else Path(out) / Path(path).stem if len(frames) > 1 else Path(out)
@@ -364,7 +416,49 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
             on_frame(frame, folder)
         starts = {**(starts or {}), **frame.fits}
         results.append(frame)
-    if out is not None and len(frames) > 1:
-        from ..report.sequence import write_sequence_report
-        write_sequence_report(out)
+    if out is not None:
+        finish_run(out)
+        if len(frames) > 1:
+            from ..report.sequence import write_sequence_report
+            write_sequence_report(out)
     return results
+
+
+RUN_FILE = "run.json"
+
+
+def start_run(out, frames, kinds, force=False):
+    """Claim the output folder for a fit run: refuse one that holds an earlier run's fits
+    (InvfaceError) unless ``force``, which removes them (the kind folders with a fit.json and
+    the report pages, nothing else); then write out/run.json {frames, kinds, finished: false},
+    which the reports read to name what a stopped run left out."""
+    import shutil
+    from ..report.runs import earlier_fits
+    out = Path(out)
+    old = earlier_fits(out)
+    if old and not force:
+        raise InvfaceError(f"{out}: holds an earlier run's fits ({len(old)} fit.json, e.g. {old[0]}); "
+                           "pass --force to replace them, or choose another output folder")
+    for f in old:
+        shutil.rmtree(f.parent)
+    for page in [*out.glob("index.html"), *out.glob("*/index.html"), *out.glob("weights_*.png"),
+                 *out.glob("activations_*.png")]:
+        page.unlink()
+    out.mkdir(parents=True, exist_ok=True)
+    _write_json(out / RUN_FILE, {"frames": list(frames), "kinds": list(kinds), "finished": False})
+
+
+def finish_run(out):
+    """Mark out/run.json finished."""
+    import json
+    path = Path(out) / RUN_FILE
+    run = json.loads(path.read_text()) if path.is_file() else {}
+    _write_json(path, dict(run, finished=True))
+
+
+def _write_json(path, data):
+    import json
+    import os
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=1))
+    os.replace(tmp, path)

@@ -20,6 +20,8 @@ class ScanResult:
     scan: str
     mode: str
     lam: float
+    unit: str = "m"
+    unit_source: str = "given"
 
     weights = property(lambda self: self.fit.weights, doc="{blendshape name: weight}")
     jaw = property(lambda self: self.fit.jaw, doc="(6,) jaw parameters")
@@ -37,7 +39,7 @@ class ScanResult:
     def summary(self):
         """The fit.json dictionary."""
         return dict(self.fit.summary(), history=self.fit.history, scan=self.scan, mode=self.mode, lam=self.lam,
-                    seconds=self.seconds)
+                    seconds=self.seconds, scan_unit=self.unit, scan_unit_source=self.unit_source)
 
     def save(self, folder):
         """Write fit.json, fit.npz, fitted.ply (each atomically) and the report; returns the page."""
@@ -46,14 +48,15 @@ class ScanResult:
         from ..report.fit import write_report
         folder = Path(folder)
         write_scan_fit(folder, self.model, self.fit, scan=self.scan, mode=self.mode, lam=self.lam,
-                       seconds=self.seconds)
+                       seconds=self.seconds, scan_unit=self.unit, scan_unit_source=self.unit_source)
         write_mesh(folder / "fitted.ply", self.fit.surface, self.model.triangles)
         return write_report(folder, title=f"invface scan fit: {Path(self.scan).name}")
 
     def describe(self):
         """Lines for a terminal."""
         s, e = self.summary(), self.error_mm
-        lines = [f"{self.fit.kind} fit: {s['iterations']} iterations ({self.fit.status}), {self.seconds:.1f} s; "
+        lines = [f"scan unit: {self.unit} ({self.unit_source})",
+                 f"{self.fit.kind} fit: {s['iterations']} iterations ({self.fit.status}), {self.seconds:.1f} s; "
                  f"error median {e['median']:.3f} mm, max {e['max']:.3f} mm; {s['nonzero_weights']} non-zero weights",
                  "largest weights: " + ", ".join(f"{k} {v:.3f}" for k, v in
                                                  sorted(self.weights.items(), key=lambda kv: -kv[1])[:5])]
@@ -64,19 +67,30 @@ class ScanResult:
 
 
 def fit_scan(scan, model=None, kind="blendshape", mode="correspondence", lam=EQ13_LAMBDA, max_iter=50,
-             progress=None, **options):
+             unit=None, progress=None, **options):
     """Fit controls and rigid pose of a model to a 3D scan (Eq. 13). scan: an OBJ/PLY path
-    (metres, the model's frame) or (vertices (S, 3) m, triangles (G, 3)); model: a FaceModel,
-    a bundle path or None (the built-in template); kind: "blendshape" or "simulation"; mode:
-    "correspondence" (the model's topology) or "nearest" (any mesh); progress: each dogleg
-    iteration's log entry. Other options go to ``fit.scan.fit_scan``. Returns a ScanResult."""
+    or (vertices (S, 3), triangles (G, 3)), in the model's frame; unit: the scan's unit
+    ("m", "cm" or "mm"; default: found from its size, as ``build-model`` does, and reported
+    on the result); model: a FaceModel, a bundle path or None (the built-in template); kind:
+    "blendshape" or "simulation"; mode: "correspondence" (the model's topology) or "nearest"
+    (any mesh); progress: each dogleg iteration's log entry. Other options go to
+    ``fit.scan.fit_scan``. Returns a ScanResult."""
+    from ..errors import ConfigError
     from ..fit.scan import fit_scan as fit
     from ..mesh.meshfile import read_mesh
+    from ..morph.target import UNITS, detect_unit
     from .models import load_model
     model = load_model(model)
     if isinstance(scan, (str, Path)):
         name, (V, F) = str(scan), read_mesh(scan)
     else:
         name, (V, F) = "scan", (np.asarray(scan[0], float), None if scan[1] is None else np.asarray(scan[1]))
-    result = fit(model, V, F, kind=kind, mode=mode, lam=lam, max_iter=max_iter, progress=progress, **options)
-    return ScanResult(result, model, name, mode, lam)
+    if unit is None:
+        unit, source = detect_unit(V, name)[0], "found from its size"
+    elif unit not in UNITS:
+        raise ConfigError(f"unknown scan unit {unit!r}: use one of {', '.join(UNITS)}")
+    else:
+        source = "given"
+    result = fit(model, V * UNITS[unit], F, kind=kind, mode=mode, lam=lam, max_iter=max_iter, progress=progress,
+                 **options)
+    return ScanResult(result, model, name, mode, lam, unit, source)

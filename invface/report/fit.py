@@ -180,6 +180,9 @@ def _fit_images(folder):
 COMPARE = (("model", lambda s: s["kind"]),
            ("vertex error median / max (mm)", lambda s: (f"{s['truth']['median_mm']:.3f} / {s['truth']['max_mm']:.2f}"
                                                        if "truth" in s else "-")),
+           ("median error in depth / in the image plane / shape only (mm)",
+            lambda s: (f"{s['truth']['depth_median_mm']:.3f} / {s['truth']['in_plane_median_mm']:.3f} / "
+                       f"{s['truth']['shape_median_mm']:.3f}" if "depth_median_mm" in s.get("truth", {}) else "-")),
            ("lip volume change", lambda s: f"{100 * s['lip_volume_change']:+.2f} %" if "lip_volume_change" in s else "-"),
            ("non-zero weights", lambda s: s.get("nonzero_weights", "-")),
            ("active muscles", lambda s: s.get("active_muscles", "-") if s.get("activations") else "-"),
@@ -224,6 +227,9 @@ def write_report(run, title=None):
     head = "".join(f"<th>{html.escape(n)}</th>" for n, _ in COMPARE)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(str(fn(s)))}</td>" for _, fn in COMPARE) + "</tr>" for s in rows)
     title = title or f"invface fit report: {run.name}"
+    from .runs import run_notes
+    missing = run_notes(run) if (run / "run.json").is_file() else run_notes(run.parent, run.name)
+    body += "".join(f"<tr><td colspan={len(COMPARE)} class=note>{html.escape(n)}</td></tr>" for n in missing)
     page = (f"<!doctype html><html><head><meta charset=utf-8><title>{html.escape(title)}</title><style>"
             "body{font-family:sans-serif;margin:2em;max-width:1500px}table{border-collapse:collapse}"
             "td,th{border:1px solid #ccc;padding:4px 8px;font-size:90%}.grid{display:flex;flex-wrap:wrap;gap:8px}"

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..errors import InvfaceError
 from .fit import COMPARE, _figure
+from .runs import run_notes
 
 ACTIVE = 0.05        # a control is drawn when it exceeds this in some frame
 
@@ -100,9 +101,11 @@ def write_sequence_report(run, title=None):
             "body{font-family:sans-serif;margin:2em;max-width:1500px}table{border-collapse:collapse;margin:1em 0}"
             "td,th{border:1px solid #ccc;padding:4px 8px;font-size:90%}.grid{display:flex;flex-wrap:wrap;gap:8px}"
             "figure{margin:0}figure img{max-width:720px;border:1px solid #ddd}img.thumb{max-width:200px}"
-            "figcaption{font-size:80%;color:#555}</style></head><body>"
+            "figcaption{font-size:80%;color:#555}.note{background:#fff6d5;padding:6px}</style></head><body>"
             f"<h1>{html.escape(title)}</h1><p>Each frame is warm-started from the previous one's solution; "
-            "frame names link to the frame's own report.</p>" + "".join(sections) + "</body></html>")
+            "frame names link to the frame's own report.</p>"
+            + "".join(f"<p class=note>{html.escape(n)}</p>" for n in run_notes(run))
+            + "".join(sections) + "</body></html>")
     out = run / "index.html"
     tmp = run / "index.html.tmp"
     tmp.write_text(page)

@@ -1,0 +1,80 @@
+"""The optional landmark detector: its documented install, and real photographs end to end
+(``../shared/data/real/photos``: real people, not made by our model; skipped when absent)."""
+import importlib.metadata
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import SMALL_RESOLUTION
+from invface.fit import landmarks
+
+PHOTOS = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "photos"
+needs_detector = pytest.mark.skipif(not landmarks.available(), reason="landmark detector not installed "
+                                    "(scripts/install.sh landmarks)")
+
+
+def _requirement_names(text):
+    return {re.split(r"[\s;~=<>!\[(]", r.strip(), maxsplit=1)[0].lower().replace("_", "-") for r in text}
+
+
+@needs_detector
+def test_the_documented_install_brings_what_mediapipe_needs():
+    """mediapipe goes in with --no-deps; the INSTALL line (and the landmarks extra) must name
+    each of its requirements that we do not already have, else the detector fails on import
+    in a fresh environment (it did: ``No module named 'certifi'``)."""
+    needed = _requirement_names(importlib.metadata.requires("mediapipe") or [])
+    reqs = importlib.metadata.requires("invface") or []
+    ours = _requirement_names(r for r in reqs if "extra ==" not in r)
+    extra = _requirement_names(r for r in reqs if re.search(r"extra\s*==\s*.landmarks.", r))
+    provided_otherwise = {"opencv-contrib-python",    # cv2: our opencv-contrib-python-headless
+                          "sounddevice"}              # audio tasks only, never imported for faces
+    named = _requirement_names(w.strip("'\"") for w in landmarks.INSTALL.split()
+                               if w not in ("pip", "install", "&&") and not w.startswith("-"))
+    missing = needed - ours - named - provided_otherwise
+    assert not missing, f"INSTALL does not bring {sorted(missing)}: {landmarks.INSTALL}"
+    missing = needed - ours - extra - provided_otherwise
+    assert not missing, f"the landmarks extra does not bring {sorted(missing)}"
+    assert "certifi" in needed and "certifi" not in ours           # the case that failed
+    # and the detector's whole import chain loads in a fresh interpreter, without sounddevice
+    code = ("import sys, mediapipe; from mediapipe.tasks.python import BaseOptions, vision; "
+            "from invface.fit.landmarks import model_file; model_file(); "
+            "print('sounddevice' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.strip() == "False", r.stderr[-2000:]
+
+
+def _photos():
+    return sorted(PHOTOS.glob("*.jpg")) if PHOTOS.is_dir() else []
+
+
+@needs_detector
+@pytest.mark.skipif(not _photos(), reason="../shared/data/real/photos absent")
+@pytest.mark.parametrize("photo", [p.name for p in _photos()])
+def test_a_real_photo_fits_end_to_end_with_both_models(photo, tmp_path):
+    """One command per photo: curves from the detector, pose from them, light and albedo
+    calibrated on the photo itself, both model kinds fitted and reported (small head, few
+    shading iterations: the figures of the default head are in bench/RESULTS.md)."""
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "invface.cli", "fit-plate", str(PHOTOS / photo), "--model-kind", "both",
+                        "--resolution", str(SMALL_RESOLUTION), "--iterations", "3", "-o", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "Traceback" not in r.stderr
+    page = (out / "index.html").read_text()
+    fits = {k: json.loads((out / k / "fit.json").read_text()) for k in ("blendshape", "simulation")}
+    for kind, fit in fits.items():
+        assert f"{kind} model" in page and (out / kind / "wipe.png").is_file()
+        assert fit["curves_from"].startswith("landmark detector") or "detector" in fit["curves_from"].lower()
+        # a head in front of the camera, facing it, its curves on the photo's features
+        assert np.abs(fit["rotation"]).max() < 0.6, fit["rotation"]
+        assert fit["curve_rms_px"] < 10.0, fit["curve_rms_px_by_curve"]
+        assert set(fit["curve_rms_px_by_curve"]) >= {"lip_outer_upper", "eye_L_upper", "jaw_line"}
+    # the simulation stage starts from the blendshape stage and must not lose the face
+    assert fits["simulation"]["curve_rms_px"] < 1.5 * fits["blendshape"]["curve_rms_px"] + 0.5
+    assert fits["simulation"]["activations"] and max(fits["simulation"]["activations"].values()) > 0.0
+    assert "calibrated in" in r.stdout and (out / "calib.npz").is_file()
