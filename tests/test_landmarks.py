@@ -49,18 +49,26 @@ def test_the_documented_install_brings_what_mediapipe_needs():
 
 
 def _photos():
-    return sorted(PHOTOS.glob("*.jpg")) if PHOTOS.is_dir() else []
+    """The real photos: ../shared/data/real/photos and scikit-image's astronaut portrait."""
+    import importlib.util
+    names = [p.name for p in sorted(PHOTOS.glob("*.jpg"))] if PHOTOS.is_dir() else []
+    return names + (["astronaut"] if importlib.util.find_spec("skimage") else [])
 
 
 @needs_detector
-@pytest.mark.skipif(not _photos(), reason="../shared/data/real/photos absent")
-@pytest.mark.parametrize("photo", [p.name for p in _photos()])
+@pytest.mark.parametrize("photo", _photos() or [pytest.param("none", marks=pytest.mark.skip("no real photos"))])
 def test_a_real_photo_fits_end_to_end_with_both_models(photo, tmp_path):
     """One command per photo: curves from the detector, pose from them, light and albedo
     calibrated on the photo itself, both model kinds fitted and reported (small head, few
     shading iterations: the figures of the default head are in bench/RESULTS.md)."""
+    path = PHOTOS / photo
+    if photo == "astronaut":
+        from skimage.data import astronaut
+
+        from invface.render.plates import srgb_to_linear, write_image
+        path = write_image(tmp_path / "astronaut.png", srgb_to_linear(astronaut() / 255.0).astype(np.float32))
     out = tmp_path / "out"
-    r = subprocess.run([sys.executable, "-m", "invface.cli", "fit-plate", str(PHOTOS / photo), "--model-kind", "both",
+    r = subprocess.run([sys.executable, "-m", "invface.cli", "fit-plate", str(path), "--model-kind", "both",
                         "--resolution", str(SMALL_RESOLUTION), "--iterations", "3", "-o", str(out)],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr[-3000:]
@@ -78,3 +86,15 @@ def test_a_real_photo_fits_end_to_end_with_both_models(photo, tmp_path):
     assert fits["simulation"]["curve_rms_px"] < 1.5 * fits["blendshape"]["curve_rms_px"] + 0.5
     assert fits["simulation"]["activations"] and max(fits["simulation"]["activations"].values()) > 0.0
     assert "calibrated in" in r.stdout and (out / "calib.npz").is_file()
+
+
+@needs_detector
+def test_a_photo_without_a_face_is_a_clear_error(tmp_path):
+    from invface.render.plates import write_image
+    write_image(tmp_path / "wall.png", np.full((120, 160, 3), 0.3, np.float32)
+                + np.random.default_rng(0).normal(0, 0.05, (120, 160, 3)).astype(np.float32))
+    r = subprocess.run([sys.executable, "-m", "invface.cli", "fit-plate", str(tmp_path / "wall.png"),
+                        "--resolution", str(SMALL_RESOLUTION), "-o", str(tmp_path / "out")],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "wall.png: no face found by the landmark detector" in r.stderr, r.stderr[-2000:]
