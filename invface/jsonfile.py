@@ -1,7 +1,9 @@
-"""Reading small JSON input files (cameras, activations, curves) with clear errors."""
+"""Small JSON files: reading inputs (cameras, activations, curves) with clear errors, and
+writing results atomically."""
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 from .errors import InvfaceError
@@ -20,3 +22,11 @@ def read_object(path, error=InvfaceError, what="JSON file"):
     if not isinstance(data, dict):
         raise error(f"{path}: a {what} must hold a JSON object")
     return data
+
+
+def write_object(path, data):
+    """Write ``data`` as indented JSON to ``path`` through a temporary file and a rename."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=1))
+    os.replace(tmp, path)

@@ -1,11 +1,12 @@
 """Writing a fit's results for the report: ``fit.json`` (summary) and ``fit.npz`` (arrays)."""
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
 import numpy as np
+
+from ..jsonfile import write_object
 
 
 class NamedControls:
@@ -49,7 +50,5 @@ def write_fit_files(folder, summary, arrays):
     tmp = folder / "fit.npz.tmp.npz"
     np.savez_compressed(tmp, **arrays)
     os.replace(tmp, folder / "fit.npz")
-    tmp = folder / "fit.json.tmp"
-    tmp.write_text(json.dumps(json_safe(summary), indent=1))
-    os.replace(tmp, folder / "fit.json")
+    write_object(folder / "fit.json", json_safe(summary))
     return folder / "fit.json"

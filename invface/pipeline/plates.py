@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import InvfaceError, SimulationError
 from ..fit.curves import rms_px
+from ..jsonfile import write_object
 from ..fit.lambdas import EQ14_LAMBDA, EQ15_LAMBDA_1, face_scale
 
 PLATE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr")
@@ -446,7 +447,7 @@ def start_run(out, frames, kinds, force=False):
                  *out.glob("activations_*.png")]:
         page.unlink()
     out.mkdir(parents=True, exist_ok=True)
-    _write_json(out / RUN_FILE, {"frames": list(frames), "kinds": list(kinds), "finished": False})
+    write_object(out / RUN_FILE, {"frames": list(frames), "kinds": list(kinds), "finished": False})
 
 
 def finish_run(out):
@@ -454,12 +455,4 @@ def finish_run(out):
     import json
     path = Path(out) / RUN_FILE
     run = json.loads(path.read_text()) if path.is_file() else {}
-    _write_json(path, dict(run, finished=True))
-
-
-def _write_json(path, data):
-    import json
-    import os
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1))
-    os.replace(tmp, path)
+    write_object(path, dict(run, finished=True))
