@@ -7,7 +7,7 @@ from invface.errors import InvfaceError, MeshError
 from invface.sim import materials
 from invface.sim.fem import Elements, FleshModel, Pattern
 from invface.sim.quasistatic import Simulator
-from invface.sim.tracks import MuscleTracks, Tracks, activation_from_length
+from invface.sim.tracks import MuscleTracks, Tracks, activation_slopes
 
 MAT = materials.Material()
 
@@ -122,9 +122,9 @@ def test_centerline_length_and_activation_curve(small_model):
     assert np.allclose(fd, np.bincount(tr.owner, np.sum(dL * dC, 1), minlength=len(L)), rtol=1e-6)
     mus = m.muscles[0]
     L0 = mus.rest_length
-    a, da = activation_from_length(mus, 0.75 * L0)
-    assert np.isclose(a, 0.5) and np.isclose(da, -2.0 / L0)
-    assert activation_from_length(mus, 1.2 * L0)[0] == 0.0
+    a, da = mus.activation(0.75 * L0), activation_slopes(mus, 0.75 * L0)
+    assert np.isclose(a, 0.5) and np.allclose(da, -2.0 / L0)
+    assert mus.activation(1.2 * L0) == 0.0
 
 
 def test_activation_derivative_at_rest_is_the_one_into_the_box(small_expressive_model):

@@ -36,10 +36,14 @@ class ScanResult:
         """{median, mean, max} of the per-vertex distance to the scan, mm."""
         return self.fit.summary()["error_mm"]
 
+    def _run(self):
+        """What fit.json records beside the fit's own summary."""
+        return dict(scan=self.scan, mode=self.mode, lam=self.lam, seconds=self.seconds, scan_unit=self.unit,
+                    scan_unit_source=self.unit_source)
+
     def summary(self):
         """The fit.json dictionary."""
-        return dict(self.fit.summary(), history=self.fit.history, scan=self.scan, mode=self.mode, lam=self.lam,
-                    seconds=self.seconds, scan_unit=self.unit, scan_unit_source=self.unit_source)
+        return dict(self.fit.summary(), history=self.fit.history, **self._run())
 
     def save(self, folder):
         """Write fit.json, fit.npz, fitted.ply (each atomically) and the report; returns the page."""
@@ -47,8 +51,7 @@ class ScanResult:
         from ..mesh.meshfile import write_mesh
         from ..report.fit import write_report
         folder = Path(folder)
-        write_scan_fit(folder, self.model, self.fit, scan=self.scan, mode=self.mode, lam=self.lam,
-                       seconds=self.seconds, scan_unit=self.unit, scan_unit_source=self.unit_source)
+        write_scan_fit(folder, self.model, self.fit, **self._run())
         write_mesh(folder / "fitted.ply", self.fit.surface, self.model.triangles)
         return write_report(folder, title=f"invface scan fit: {Path(self.scan).name}")
 

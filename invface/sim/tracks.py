@@ -12,12 +12,6 @@ import numpy as np
 from ..errors import InvfaceError
 
 
-def activation_from_length(muscle, length):
-    """Activation a_m(L) and its slope da/dL (1/m) from the muscle's activation-length curve
-    (at a break of the piecewise-linear curve, the slope on the lengthening side)."""
-    return muscle.activation(length), activation_slopes(muscle, length)[1]
-
-
 def activation_slopes(muscle, length):
     """One-sided slopes (da/dL on the shortening side, on the lengthening side) (1/m) of the
     activation-length curve at ``length``; they differ only on a break of the curve, such as
