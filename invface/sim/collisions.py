@@ -5,7 +5,7 @@ A contact is a free boundary vertex x and a triangle (a, b, c) on the other side
 at set-up: every facing triangle of the other lip or lid, or of the cranium or jaw mesh,
 whose centroid lies within ``radius`` (1.5 tet edges) of the vertex at rest. Its energy is
 
-    E = w(r) e(gap),   gap = n(a,b,c) . (x - a) - gap_rest,   r = |x - centroid(a,b,c)|
+    E = w(r) e(gap),   gap = n . (x - a) - gap_rest,   r^2 = |x - centroid(a,b,c)|^2 - (n . (x - a))^2
 
 with n the triangle's unit normal (so the plane moves and turns with the flesh or bone it
 belongs to; jaw triangles move rigidly with the jaw transform), gap_rest the rest gap where
@@ -14,11 +14,14 @@ s = max(-gap, 0)
 
     e(s) = 0 (s <= 0),  k s^3 / (6 d) (0 < s < d),  k/2 s^2 - k d/2 s + k d^2/6 (s >= d)
 
-(cubic onset over ``CONTACT_SMOOTHING``), and w a C2 bump (1 at the centroid, 0 from
-``radius`` on): each triangle's plane stands for the facing surface only near that
-triangle, and a vertex's triangles hand over to each other smoothly as it slides. (One
-plane per vertex extended without a gate made false contacts: lips dragged below the upper
-teeth's edge by a 0.45 rad jaw opening were 6-9 mm "behind" its planes.)
+(cubic onset over ``CONTACT_SMOOTHING``), and w a C2 bump of r^2 (1 on the normal through
+the centroid, 0 from ``radius`` on): each triangle's plane stands for the facing surface
+only near that triangle, and a vertex's triangles hand over to each other smoothly as it
+slides. (One plane per vertex extended without a gate made false contacts: lips dragged
+below the upper teeth's edge by a 0.45 rad jaw opening were 6-9 mm "behind" its planes.)
+The gate measures r in the triangle's plane, not in space: a gate of the 3D distance faded
+the contact as the vertex went deeper, and a lower lip pressed 7 mm behind the tooth sheet
+(lipStretch with the jaw at 0.6 rad) was let through.
 
 The total collision energy is therefore a C2 function of the flesh positions and the jaw
 parameters alone; its gradient and full Hessian (including the turning of the planes and
@@ -111,34 +114,34 @@ _C = np.array([1.0, -1 / 3, -1 / 3, -1 / 3])      # x - centroid(a, b, c) = sum_
 
 def contact_energy(q, rest_gap, reach, k, order=2):
     """Energy of contacts q = (x, a, b, c) (c,12): the penalty of the gap of x from the
-    plane of (a, b, c) less its rest gap ``rest_gap`` (c,), times a gate w(r) of the distance
-    r of x from the triangle's centroid that is 1 up to ``reach`` (c,2)[:, 0] and falls
-    smoothly (C2) to 0 at reach[:, 1]: the plane of one triangle stands for the facing
-    surface only near it. Stiffness k (N/m). Returns e (c,), and with order >= 1 the gradient
-    (c,12), with order 2 the Hessian (c,12,12)."""
+    plane of (a, b, c) less its rest gap ``rest_gap`` (c,), times a gate w of the in-plane
+    distance r of x from the triangle's centroid (its distance from the normal line through
+    the centroid), 1 within reach[:, 0] and falling smoothly (C2 in r^2) to 0 at reach[:, 1]
+    (both (c,)): the plane of one triangle stands for the facing surface only near it, and a
+    vertex pushed deep behind it is held as firmly as one just touching it. Stiffness k
+    (N/m). Returns e (c,), and with order >= 1 the gradient (c,12), with order 2 the Hessian
+    (c,12,12)."""
     x, a, b, c = (q[:, 3 * i:3 * i + 3] for i in range(4))
     out = plane_gap(x, a, b, c, order)
-    gap = (out if order == 0 else out[0]) - rest_gap
-    e, de, dde = penalty(gap, k)
+    g = out if order == 0 else out[0]
+    e, de, dde = penalty(g - rest_gap, k)
     dv = x - (a + b + c) / 3
-    r = np.maximum(np.linalg.norm(dv, axis=1), 1e-30)
-    span = reach[:, 1] - reach[:, 0]
-    S, dS, ddS = _smoothstep((r - reach[:, 0]) / span)
+    rho = np.einsum("ci,ci->c", dv, dv) - g * g                 # squared in-plane distance
+    span = reach[:, 1] ** 2 - reach[:, 0] ** 2
+    S, dS, ddS = _smoothstep((rho - reach[:, 0] ** 2) / span)
     w, dw, ddw = 1 - S, -dS / span, -ddS / span ** 2
     if order == 0:
         return w * e
-    rh = dv / r[:, None]
-    dr = (_C[None, :, None] * rh[:, None, :]).reshape(-1, 12)
     dg = out[1]
-    grad = (dw * e)[:, None] * dr + (w * de)[:, None] * dg
+    drho = 2 * (_C[None, :, None] * dv[:, None, :]).reshape(-1, 12) - 2 * g[:, None] * dg
+    grad = (dw * e)[:, None] * drho + (w * de)[:, None] * dg
     if order == 1:
         return w * e, grad
     outer = lambda u, v: np.einsum("ci,cj->cij", u, v)
-    P = (np.eye(3)[None] - outer(rh, rh)) / r[:, None, None]
-    Hr = np.einsum("ab,cij->caibj", np.outer(_C, _C), P).reshape(-1, 12, 12)
     Hg = out[2]
-    H = ((ddw * e)[:, None, None] * outer(dr, dr) + (dw * e)[:, None, None] * Hr
-         + (dw * de)[:, None, None] * (outer(dr, dg) + outer(dg, dr))
+    Hrho = 2 * np.kron(np.outer(_C, _C), np.eye(3))[None] - 2 * outer(dg, dg) - 2 * g[:, None, None] * Hg
+    H = ((ddw * e)[:, None, None] * outer(drho, drho) + (dw * e)[:, None, None] * Hrho
+         + (dw * de)[:, None, None] * (outer(drho, dg) + outer(dg, drho))
          + (w * dde)[:, None, None] * outer(dg, dg) + (w * de)[:, None, None] * Hg)
     return w * e, grad, H
 
@@ -251,7 +254,9 @@ class Collisions:
     def _acting(self, Q):
         q = self._q(Q)
         gap = plane_gap(*(q[:, 3 * i:3 * i + 3] for i in range(4)), order=0) - self.rest_gap
-        return (gap < 0) & (np.linalg.norm(q[:, :3] - Q[self.tri].mean(1), axis=1) < self.reach[:, 1])
+        dv = q[:, :3] - Q[self.tri].mean(1)
+        rho = np.einsum("ci,ci->c", dv, dv) - (gap + self.rest_gap) ** 2
+        return (gap < 0) & (rho < self.reach[:, 1] ** 2)
 
     def kinds(self):
         """Masks (c,) of the flesh-flesh, flesh-cranium and flesh-jaw contacts (a dict)."""
