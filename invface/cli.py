@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -223,57 +224,142 @@ def cmd_fit_scan(args):
     return 0
 
 
-def _fit_frames(model, frames, cal, kinds, out, options, curves=None, force=False):
-    """``pipeline.fit_sequence`` with bars, a line per finished kind and the report paths."""
-    from .pipeline import fit_sequence
+def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False, workers=None, scheduler=None,
+                run=None):
+    """Fit a clip's frames (``pipeline.sequence``) with bars, a line per finished kind and
+    the report paths; on a Dask cluster with ``workers`` or ``scheduler``. run: more keys for
+    run.json (what the calibration was made from)."""
+    from .pipeline import open_clip
+    from .pipeline.distributed import fit_sequence_distributed
+    from .pipeline.sequence import (finish_run, fit_frames, read_run, run_hash, start_run,
+                                    write_sequence_outputs)
+    from .jsonfile import write_object
+    clip = open_clip(clip)
+    if curves is not None and len(clip) > 1:
+        raise InvfaceError("--curves names one plate; in a sequence put FRAME.curves.json beside each frame "
+                           "(or let the detector track the curves)")
+    inputs = run_hash(model, cal, dict(options, curves=str(curves) if curves is not None else None))
+    resumed = start_run(out, clip.names if len(clip) > 1 else [], kinds, force, inputs)
+    if run:
+        write_object(out / "run.json", dict(read_run(out), **run))
+    if resumed:
+        print(f"{out}: resuming the run there (same inputs); finished frames are skipped "
+              "(--restart starts over)", flush=True)
     bars = _FitBars()
+    skipped = []
 
     def kind_done(frame, kind):
         bars.close()
         print(frame.describe(kind), flush=True)
 
-    def frame_done(frame, folder):
+    def frame_done(frame, folder, row):
         bars.close()
+        if frame is None:
+            skipped.append(row["name"])
+            return
         for w in frame.warnings:
             print(f"warning: {w}", flush=True)
         for kind, why in frame.failed.items():
             print(f"{frame.name} {kind}: did not finish: {why}", flush=True)
-        if frame.fits:
+        if frame.fits and len(clip) == 1:
             print(f"report: {folder / 'index.html'}")
     try:
-        results = fit_sequence(model, frames, cal, out, kinds, curves, progress=bars, on_kind=kind_done,
-                               on_frame=frame_done, force=force, **options)
+        if (workers or scheduler) and len(clip) > 1:
+            bar = _bar("frames", total=len(clip), unit="frame")
+
+            def progress(e):
+                if "message" in e:
+                    _progress(e["message"])
+                elif "done" in e:
+                    bar.update(e["done"] - bar.n)
+            try:
+                rows = fit_sequence_distributed(model, clip, cal, out, kinds, inputs=inputs, workers=workers or 1,
+                                                scheduler=scheduler, progress=progress, **options)
+            finally:
+                bar.close()
+            for r in rows:
+                for kind, k in r["kinds"].items():
+                    print(f"{r['name']} {kind}: curves {k['curve_rms_px']:.2f} px RMS"
+                          + (f"; flagged: {k['flagged']}" if k["flagged"] else ""))
+        else:
+            rows = fit_frames(model, clip, cal, out, kinds, curves=curves, inputs=inputs, progress=bars,
+                              on_kind=kind_done, on_frame=frame_done, **options)
     finally:
         bars.close()
-    if len(frames) > 1:
-        print(f"sequence report: {out / 'index.html'}")
-    empty = [r for r in results if not r.fits]
-    if empty:      # exit non-zero only when a plate has no kind at all
-        raise InvfaceError(empty[0].failure())
+    finish_run(out)
+    if skipped:
+        print(f"{len(skipped)} frame(s) finished before from the same inputs were skipped: "
+              + ", ".join(skipped[:5]) + (" ..." if len(skipped) > 5 else ""))
+    for r in rows:
+        if r.get("error"):
+            print(f"warning: {r['name']}: not fitted: {r['error']}", flush=True)
+    if len(clip) > 1:
+        paths = write_sequence_outputs(out, kinds, fps=clip.fps)
+        print("animation curves: " + ", ".join(str(p) for p in paths[:2]))
+        if len(paths) > 3:
+            print("overlay video(s) (plate | render | wipe): " + ", ".join(str(p) for p in paths[2:-1]))
+        print(f"sequence report: {paths[-1]}")
+        rms = [(k["curve_rms_px"], r["name"], kind) for r in rows for kind, k in r["kinds"].items()
+               if k.get("curve_rms_px") is not None]
+        if rms:
+            worst = max(rms)
+            print(f"curve RMS over {len(rows)} frames: median {statistics.median(v[0] for v in rms):.2f} px; "
+                  f"worst {worst[0]:.2f} px ({worst[1]}, {worst[2]})")
+    fitted = [r for r in rows if r["kinds"]]
+    if not fitted:      # exit non-zero only when no frame has any kind at all
+        first = rows[0] if rows else {}
+        raise InvfaceError(first.get("error") or f"{first.get('name', clip.source)}: no model kind finished: "
+                           + "; ".join(f"{k}: {why}" for k, why in first.get("failed", {}).items()))
 
 
 def cmd_fit_plate(args):
-    """Fit controls and pose to a plate, or to each frame of a folder (sequence mode)."""
+    """Fit controls and pose to a plate, or to each frame of a video or a folder (a sequence)."""
     from .fit.calibrate import Calibration
-    from .pipeline import as_plate, find_curves, model_kinds, plate_frames
-    from .pipeline.plates import start_run
+    from .pipeline import find_curves, model_kinds, open_clip
+    from .pipeline.sequence import pick_neutral, read_run
+    from .report.runs import earlier_fits
     if args.iterations < 0:
         raise InvfaceError(f"--iterations {args.iterations}: give 0 or more shape-from-shading iterations")
+    if args.workers is not None and args.workers < 1:
+        raise InvfaceError(f"--workers {args.workers}: give 1 or more worker processes")
     model = _load_model(args.model, args.resolution)
-    frames = plate_frames(args.plate)
+    clip = open_clip(args.plate, args.frames, args.camera)
+    print(clip.describe(), flush=True)
+    kinds = model_kinds(args.model_kind)
     out = Path(args.output) if args.output else Path("reports") / "fit-plate" / Path(args.plate).stem
-    start_run(out, [], model_kinds(args.model_kind), args.force)     # refused before any work is done
+    run = {}
     if args.calib:
         cal = Calibration.load(args.calib, vertex_count=len(model.neutral))
     else:
-        first = as_plate(frames[0], args.camera)
-        curves, source = find_curves(model, first, args.curves)
-        print(f"no --calib: calibrating light and albedo on {Path(frames[0]).name} itself (Eq. 14)", flush=True)
-        cal = _calibrate(model, first, out / "calib.npz", 30, curves=curves, source=source,
-                         lam_curves=args.curve_lambda)          # its warnings go into the fit's notes
+        if args.neutral_frame is not None:
+            if args.neutral_frame not in clip.indices:
+                raise InvfaceError(f"--neutral-frame {args.neutral_frame}: not among the selected frames "
+                                   f"({clip.indices[0]}..{clip.indices[-1]})")
+            pos = clip.indices.index(args.neutral_frame)
+            frame = next(clip.frames(pos, pos + 1))
+            curves, source = find_curves(model, frame.plate, args.curves)
+        elif len(clip) == 1:
+            frame = next(clip.frames())
+            curves, source = find_curves(model, frame.plate, args.curves)
+        else:
+            print("picking the most neutral-looking frame to calibrate on", flush=True)
+            frame, curves, source, _ = pick_neutral(model, clip, lam=args.curve_lambda, progress=_events)
+        saved = out / "calib.npz"
+        if not args.restart and saved.is_file() and read_run(out).get("calibrated_on") == frame.digest:
+            print(f"reusing {saved}: calibrated on {frame.name} by the run being resumed", flush=True)
+            cal = Calibration.load(saved, vertex_count=len(model.neutral))
+        else:
+            if earlier_fits(out) and not args.restart:      # refused before any work is done
+                raise InvfaceError(f"{out}: holds an earlier run's fits; pass --restart to replace them, or "
+                                   "choose another output folder")
+            print(f"no --calib: calibrating light and albedo on {frame.name} (Eq. 14)", flush=True)
+            cal = _calibrate(model, frame.plate, saved, 30, curves=curves, source=source,
+                             lam_curves=args.curve_lambda)          # its warnings go into the fit's notes
+        run = {"calibrated_on": frame.digest, "calibration_frame": frame.name}
     options = dict(iterations=args.iterations, shading=not args.no_shading, lam_curves=args.curve_lambda,
-                   solver=args.solver, camera=args.camera)
-    _fit_frames(model, frames, cal, model_kinds(args.model_kind), out, options, curves=args.curves, force=args.force)
+                   solver=args.solver)
+    _fit_frames(model, clip, cal, kinds, out, options, curves=args.curves, force=args.restart,
+                workers=args.workers, scheduler=args.scheduler, run=run)
     return 0
 
 
@@ -323,7 +409,7 @@ def _demo_fit(model, out):
     cal = _calibrate(model, as_plate(neutral), out / "calib.npz", 30,
                      pose=(truth["rotation"], truth["translation"])).calibration
     print("fitting the smile plate (made by the muscle simulation) with both models", flush=True)
-    _fit_frames(model, [smile], cal, ("blendshape", "simulation"), out / "fit-smile",
+    _fit_frames(model, smile, cal, ("blendshape", "simulation"), out / "fit-smile",
                 {"title": "invface demo: a simulation-made smile fitted by both models"}, force=True)
 
 
@@ -394,7 +480,16 @@ def build_parser():
     fs.set_defaults(func=cmd_fit_scan)
     fp = sub.add_parser("fit-plate", help="fit controls and pose to a film plate: curves (Eq. 15), then "
                                           "shape from shading (Eq. 16); a folder is a sequence")
-    fp.add_argument("plate", help="plate image (PNG/JPEG/EXR), or a folder of frames (warm-started in order)")
+    fp.add_argument("plate", help="plate image (PNG/JPEG/EXR), a video (MP4/MOV/AVI/MKV) or a folder of frames: "
+                                  "a sequence, each frame warm-started from the one before")
+    fp.add_argument("--frames", help="frames of a video or folder to fit: START:STOP[:STEP] (Python slice, "
+                                     "e.g. 0:72:2) or one index; default all")
+    fp.add_argument("--neutral-frame", type=int, help="frame index to calibrate on when no --calib (default: the "
+                                                      "most neutral-looking of 8 frames spread over the selection)")
+    fp.add_argument("--workers", type=int, help="fit frames on a local Dask cluster of this many processes "
+                                                "(contiguous chunks, one per worker; default: this process)")
+    fp.add_argument("--scheduler", help="address of a running Dask scheduler (tcp://HOST:8786) to fit on; "
+                                        "its workers must see the output folder")
     fp.add_argument("--calib", help="calibration from 'invface calibrate' (.npz); default: calibrate on the "
                                     "(first) plate itself, posed from its curves, and write DIR/calib.npz")
     fp.add_argument("--curves", help="plate curve file (JSON); default PLATE.curves.json beside the plate, "
@@ -409,7 +504,9 @@ def build_parser():
                     help="shape-from-shading solver: the paper's dogleg (Gauss-Newton on forward-mode "
                          "image Jacobians) or L-BFGS-B on adjoint gradients (for many controls)")
     fp.add_argument("--no-shading", action="store_true", help="curves only (Eq. 15)")
-    fp.add_argument("--force", action="store_true", help="replace an earlier run's fits in the output folder")
+    fp.add_argument("--restart", "--force", dest="restart", action="store_true",
+                    help="start over: replace an earlier run's fits in the output folder (a rerun with the same "
+                         "inputs otherwise resumes it, skipping the frames already fitted)")
     fp.add_argument("-o", "--output", help="report folder (default reports/fit-plate/PLATE)")
     fp.set_defaults(func=cmd_fit_plate)
     rp = sub.add_parser("report", help="(re)write the HTML report of a fit folder")

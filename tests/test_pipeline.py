@@ -196,7 +196,7 @@ def test_a_kind_that_cannot_finish_is_recorded_and_the_others_are_written(small_
     path, = write_sample_plates(m, tmp_path / "plates", names=["smile_blendshape"], size=(240, 180))
     cal = Calibration(gamma=studio_light(), albedo=skin_albedo(m))
     _failing_simulation(monkeypatch)
-    frame, = fit_sequence(m, [path], cal, tmp_path / "out", kinds="both", shading=False)
+    frame = fit_sequence(m, [path], cal, tmp_path / "out", kinds="both", shading=False)[0]["fit"]
     assert set(frame.fits) == {"blendshape"} and "did NOT converge" in frame.failed["simulation"]
     saved = json.loads((tmp_path / "out/blendshape/fit.json").read_text())
     assert any("simulation model's fit did not finish: Newton did NOT" in n for n in saved["notes"])
@@ -204,7 +204,7 @@ def test_a_kind_that_cannot_finish_is_recorded_and_the_others_are_written(small_
     assert "simulation model&#x27;s fit did not finish" in (tmp_path / "out/index.html").read_text()
     # no kind finishes: nothing is written, and saving names why
     _failing_simulation(monkeypatch, kinds=("blendshape", "simulation"))
-    frame, = fit_sequence(m, [path], cal, tmp_path / "none", kinds="both", shading=False)
+    frame = fit_sequence(m, [path], cal, tmp_path / "none", kinds="both", shading=False)[0]["fit"]
     from invface.report.runs import earlier_fits
     assert frame.fits == {} and earlier_fits(tmp_path / "none") == []
     with pytest.raises(InvfaceError, match="no model kind finished: blendshape: Newton did NOT"):

@@ -74,25 +74,70 @@ def available():
         return False
 
 
-def detect_landmarks(image_srgb, name="plate"):
-    """(478, 2) px: the detector's landmarks on an sRGB image (H, W, 3) in [0, 1] or uint8;
-    pixels in the OpenCV convention (centre of the top-left pixel is (0, 0))."""
+def _landmarker(mode):
+    """A MediaPipe FaceLandmarker for one face in running mode "IMAGE" or "VIDEO"."""
     path = model_file()
     try:
-        import mediapipe as mp
         from mediapipe.tasks.python import BaseOptions, vision
     except ImportError as e:
         raise InvfaceError(f"automatic curves need mediapipe ({e}); install with: {INSTALL}") from None
+    opts = vision.FaceLandmarkerOptions(base_options=BaseOptions(model_asset_path=str(path)), num_faces=1,
+                                        running_mode=getattr(vision.RunningMode, mode))
+    return vision.FaceLandmarker.create_from_options(opts)
+
+
+def _mp_image(image_srgb):
+    import mediapipe as mp
     img = np.asarray(image_srgb)
     if img.dtype != np.uint8:
         img = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
-    h, w = img.shape[:2]
-    opts = vision.FaceLandmarkerOptions(base_options=BaseOptions(model_asset_path=str(path)), num_faces=1)
-    with vision.FaceLandmarker.create_from_options(opts) as det:
-        res = det.detect(mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(img[..., :3])))
+    return mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(img[..., :3])), img.shape[:2]
+
+
+def _points(res, size, name):
     if not res.face_landmarks:
         raise InvfaceError(f"{name}: no face found by the landmark detector; draw the curves and pass --curves")
+    h, w = size
     return np.array([[p.x * w - 0.5, p.y * h - 0.5] for p in res.face_landmarks[0]])
+
+
+def detect_landmarks(image_srgb, name="plate"):
+    """(478, 2) px: the detector's landmarks on an sRGB image (H, W, 3) in [0, 1] or uint8;
+    pixels in the OpenCV convention (centre of the top-left pixel is (0, 0))."""
+    with _landmarker("IMAGE") as det:
+        img, size = _mp_image(image_srgb)
+        return _points(det.detect(img), size, name)
+
+
+class LandmarkTracker:
+    """The detector in its video mode: frames given in time order are tracked from the
+    previous frame's face rather than detected afresh (steadier curves, and a face is kept
+    through frames where a fresh detection would miss it). ``tracker(image_srgb, time_s,
+    name)`` -> (478, 2) px as ``detect_landmarks``; a time not after the previous one starts
+    a new track. Use as a context manager or call ``close()``."""
+
+    def __init__(self):
+        self._det, self._last = None, None
+
+    def __call__(self, image_srgb, time_s, name="frame"):
+        ms = int(round(1000 * float(time_s)))
+        if self._det is None or (self._last is not None and ms <= self._last):
+            self.close()
+            self._det = _landmarker("VIDEO")
+        self._last = ms
+        img, size = _mp_image(image_srgb)
+        return _points(self._det.detect_for_video(img, ms), size, name)
+
+    def close(self):
+        if self._det is not None:
+            self._det.close()
+        self._det, self._last = None, None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
 
 
 def curves_from_landmarks(points):

@@ -71,3 +71,76 @@ def write_sample_plates(model, folder, names=None, size=(720, 540), noise=0.005,
         write_curves(folder / f"{name}.curves.json", curves, image_size=cam.size)
         out.append(path)
     return out
+
+
+def clip_controls(model, n, fps=24.0):
+    """A smooth trajectory of n frames for a synthetic clip: a smile that rises and falls, the
+    jaw opening and closing, the brows lifting, the head turning and nodding. Returns
+    [(weights {name: w}, jaw (6,), rotation (3,) rad, translation (3,) m)] per frame."""
+    t = np.arange(n) / fps
+    names = set(model.blendshape_names)
+    out = []
+    for s in t:
+        phase = 2 * np.pi * s / max(n / fps, 1e-9)
+        w = {"lipCornerPull_L": 0.35 * (1 - np.cos(phase)), "lipCornerPull_R": 0.3 * (1 - np.cos(phase)),
+             "browInnerUp_L": 0.25 * (1 + np.sin(phase)), "browInnerUp_R": 0.25 * (1 + np.sin(phase))}
+        w = {k: float(v) for k, v in w.items() if k in names}
+        jaw = np.array([0.04 * (1 - np.cos(2 * phase)), 0, 0, 0, 0, 0])
+        rot = (0.03 * np.sin(phase), -0.12 * np.sin(phase + 0.5), 0.0)
+        tr = (0.002 * np.sin(phase), 0.0, 0.003 * np.cos(phase))
+        out.append((w, jaw, rot, tr))
+    return out
+
+
+def write_sample_clip(model, folder, n=24, kind="blendshape", size=(320, 240), fps=24.0, noise=0.005,
+                      curve_noise=0.3, video=True, progress=None):
+    """A synthetic clip with known truth from ``clip_controls``: folder/frames/frame_NNN.png
+    with each frame's camera, truth and curve files (a folder sequence), and with ``video``
+    folder/clip.mp4 (MPEG-4, lossy), its camera clip.json and the per-frame sidecars
+    clip.frame_NNNNNN.truth.json / .curves.json beside it. Deterministic (but for the video
+    encoder). Returns (frames folder, video path or None)."""
+    import json
+    from pathlib import Path
+
+    import cv2
+
+    from ..model.controls import FitVector
+    from ..render.plates import linear_to_srgb, write_image
+    from .pose import pose_points
+    folder = Path(folder)
+    frames = folder / "frames"
+    frames.mkdir(parents=True, exist_ok=True)
+    cam = sample_camera(*size)
+    gamma, albedo = studio_light(), skin_albedo(model)
+    vec = FitVector.of(model)
+    sm = model.surface_model(kind)
+    writer = None
+    if video:
+        cam.save(folder / "clip.json")
+        writer = cv2.VideoWriter(str(folder / "clip.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), fps, tuple(size))
+    rng = np.random.default_rng(7)
+    for i, (weights, jaw, rot, tr) in enumerate(clip_controls(model, n, fps)):
+        if progress:
+            progress(f"clip frame {i + 1}/{n}")
+        p = model.parameters({"weights": weights, "jaw": jaw})
+        x = sm.surface(p)
+        image, _ = render_plate(model, x, cam, gamma, albedo, rot, tr, noise=noise, seed=i)
+        xr = pose_points(x, rot, tr)
+        curves = {c: projection_jacobian(cam, xr[model.curves[c]])[0] for c in PLATE_CURVES}
+        curves = {c: v + rng.normal(0, curve_noise, v.shape) for c, v in curves.items()}
+        truth = {"kind": kind, "weights": weights, "jaw": p[vec.jaw].tolist(), "rotation": list(rot),
+                 "translation": list(tr), "light": "studio_light()", "albedo": "skin_albedo(model, seed=0)",
+                 "noise": noise, "frame": i, "time": i / fps}
+        name = f"frame_{i:03d}"
+        write_image(frames / f"{name}.png", image)
+        cam.save(frames / f"{name}.json")
+        (frames / f"{name}.truth.json").write_text(json.dumps(truth, indent=1))
+        write_curves(frames / f"{name}.curves.json", curves, image_size=cam.size)
+        if writer is not None:
+            (folder / f"clip.frame_{i:06d}.truth.json").write_text(json.dumps(truth, indent=1))
+            write_curves(folder / f"clip.frame_{i:06d}.curves.json", curves, image_size=cam.size)
+            rgb = (np.clip(linear_to_srgb(image), 0, 1) * 255 + 0.5).astype(np.uint8)
+            writer.write(np.ascontiguousarray(rgb[..., ::-1]))
+    if writer is not None:
+        writer.release()
+    return frames, (folder / "clip.mp4") if video else None

@@ -20,8 +20,10 @@ from ..errors import ConfigError
 from ..fit.lambdas import EQ14_LAMBDA
 from .models import ModelBuild, build_model, load_model
 from .plates import (FrameFit, PlateCalibration, PoseEstimate, as_plate, auto_calibrate, calibrate_plate,
-                     curve_lambda, find_curves, fit_frame, fit_sequence, model_kinds, plate_frames,
-                     pose_from_curves, score_against_truth)
+                     curve_lambda, find_curves, fit_frame, model_kinds, plate_frames, pose_from_curves,
+                     score_against_truth)
+from .clips import Clip, open_clip
+from .sequence import fit_sequence
 from .scans import ScanResult, fit_scan
 from .simulate import Simulation, simulate
 
@@ -64,7 +66,7 @@ def fit_plate(plate, calibration=None, model=None, kinds=("blendshape",), curves
                      **options)
 
 
-__all__ = ["ModelBuild", "build_model", "load_model", "FrameFit", "PlateCalibration", "PoseEstimate",
+__all__ = ["Clip", "open_clip", "ModelBuild", "build_model", "load_model", "FrameFit", "PlateCalibration", "PoseEstimate",
            "as_plate", "auto_calibrate", "calibrate", "calibrate_plate", "curve_lambda", "find_curves",
            "fit_frame", "fit_plate", "fit_sequence", "model_kinds", "plate_frames", "pose_from_curves",
            "score_against_truth", "ScanResult", "fit_scan", "Simulation", "simulate"]

@@ -22,10 +22,8 @@ import numpy as np
 
 from ..errors import InvfaceError, SimulationError
 from ..fit.curves import rms_px
-from ..jsonfile import write_object
 from ..fit.lambdas import EQ14_LAMBDA, EQ15_LAMBDA_1, face_scale
 
-PLATE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr")
 KINDS = ("blendshape", "simulation")
 DETECTOR = "landmark detector"
 
@@ -53,23 +51,22 @@ def as_plate(plate, camera=None):
 
 
 def plate_frames(source):
-    """Plate paths: [source] for an image file, its images in name order for a folder."""
-    src = Path(source)
-    if src.is_dir():
-        frames = sorted(f for f in src.iterdir() if f.suffix.lower() in PLATE_SUFFIXES)
-        if not frames:
-            raise InvfaceError(f"{src}: no plate images ({', '.join(PLATE_SUFFIXES)}) in this folder")
-        return frames
-    if src.is_file():
-        return [src]
-    raise InvfaceError(f"{src}: plate not found")
+    """Plate paths: [source] for an image file, its images in name order for a folder (a
+    video's frames: ``pipeline.clips.open_clip``)."""
+    from .clips import Clip
+    clip = Clip(source)
+    if clip.kind == "video":
+        raise InvfaceError(f"{source}: a video has no plate files; open it with pipeline.clips.open_clip")
+    return [clip.paths[i] for i in clip.indices]
 
 
-def find_curves(model, plate, curves=None):
+def find_curves(model, plate, curves=None, detector=None):
     """The plate's curves and where they came from: ``curves`` ({name: (n, 2) px}, or a curve
     file), else PLATE.curves.json beside the plate, else the landmark detector (whose face
-    oval then becomes the plate's mask when it has none). Curves mostly outside the plate are
-    an InvfaceError (``fit.curves.check_curves``). Returns ({name: (n, 2) px}, source)."""
+    oval then becomes the plate's mask when it has none; ``detector(image_srgb, name)`` ->
+    (478, 2) px replaces the single-image one, e.g. a ``fit.landmarks.LandmarkTracker`` in
+    a sequence). Curves mostly outside the plate are an InvfaceError
+    (``fit.curves.check_curves``). Returns ({name: (n, 2) px}, source)."""
     from ..fit.curves import check_curves, read_curves
     from ..fit.landmarks import curves_from_landmarks, detect_landmarks, face_mask
     from ..render.plates import linear_to_srgb
@@ -84,7 +81,7 @@ def find_curves(model, plate, curves=None):
         if curves is not None:
             found, source = read_curves(curves, model, image_size=plate.camera.size), str(curves)
         else:
-            points = detect_landmarks(linear_to_srgb(plate.image), name=str(path or "plate"))
+            points = (detector or detect_landmarks)(linear_to_srgb(plate.image), name=str(path or "plate"))
             if plate.mask is None:
                 plate.mask = face_mask(points, *plate.image.shape[:2])
             found, source = curves_from_landmarks(points), DETECTOR
@@ -277,6 +274,7 @@ class FrameFit:
     options: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
+    record: dict = field(default_factory=dict)     # {kind: extra fit.json keys} (a sequence's)
     title: str | None = None
     written: dict = field(default_factory=dict, repr=False)    # (folder, kind) -> failures then
 
@@ -298,6 +296,7 @@ class FrameFit:
         extra["warnings"] = list(self.warnings)
         if kind in self.truth:
             extra["truth"] = self.truth[kind]
+        extra.update(self.record.get(kind, {}))
         return extra
 
     def failure(self):
@@ -342,20 +341,20 @@ class FrameFit:
 
 def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), starts=None, iterations=25,
               shading=True, lam_curves=None, solver="dogleg", notes=(), title=None, progress=None,
-              on_kind=None, source=None, camera=None):
+              on_kind=None, source=None, camera=None, detector=None):
     """Fit one plate with each model kind (paper 000, Eq. 15 then 16). plate: a Plate or a path;
     calibration: a Calibration or PlateCalibration of this model and camera set-up; curves:
     see ``find_curves`` (source: where given curves came from, for the report); starts: {kind: PlateFit} of the previous frame (warm start);
     lam_curves: lambda_1 of Eq. 15 (default: scaled with the face, ``curve_lambda``);
     on_kind(frame, kind): called as each kind finishes (to write it at once); camera: for a
-    plate path (see ``render.plates.load_plate``). A kind whose simulation cannot reach an
+    plate path (see ``render.plates.load_plate``); detector: see ``find_curves``. A kind whose simulation cannot reach an
     equilibrium is recorded in ``FrameFit.failed`` and the other kinds go on. Returns a
     FrameFit."""
     from ..fit.curves import check_curves
     from ..fit.plate import fit_plate
     plate = as_plate(plate, camera)
     checked, calibration = calibration, getattr(calibration, "calibration", calibration)
-    curves, found = find_curves(model, plate, curves)
+    curves, found = find_curves(model, plate, curves, detector)
     source = source or found
     lam = curve_lambda(curves, lam_curves)
     frame = FrameFit(model=model, plate=plate, curves=curves, source=source, notes=list(notes), title=title,
@@ -380,79 +379,3 @@ def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), sta
         if on_kind is not None:
             on_kind(frame, kind)
     return frame
-
-
-def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), curves=None, progress=None,
-                 on_kind=None, on_frame=None, force=False, **options):
-    """Fit plates in order, each warm-started from the previous frame's controls and pose
-    (``fit_frame`` options: camera, iterations, shading, lam_curves, solver, title, notes).
-    frames: plate paths, or a folder (``plate_frames``); curves: for a single plate only (a
-    sequence takes FRAME.curves.json beside each frame, or the detector); out: each kind of
-    each frame is written as it finishes, to out/ for one plate or out/<frame name>/ for
-    several, with its report page, and the sequence page out/index.html; an out folder with
-    an earlier run's fits is refused unless ``force`` (``start_run``); on_kind(frame, kind)
-    and on_frame(frame, folder) are called as they finish. Returns [FrameFit]."""
-    frames = plate_frames(frames) if isinstance(frames, (str, Path)) else list(frames)
-    if curves is not None and len(frames) > 1:
-        raise InvfaceError("one curves file names one plate; in a sequence put FRAME.curves.json beside each "
-                           "frame (or let the detector find each frame's curves)")
-    kinds = model_kinds(kinds)
-    if out is not None:
-        start_run(out, [Path(f).stem for f in frames] if len(frames) > 1 else [], kinds, force)
-    results, starts = [], None
-    for i, path in enumerate(frames):
-        folder = None if out is None else Path(out) / Path(path).stem if len(frames) > 1 else Path(out)
-        if len(frames) > 1:
-            _say(progress, message=f"frame {i + 1}/{len(frames)}: {Path(path).name}")
-
-        def finished(frame, kind, folder=folder):
-            if folder is not None:
-                frame.save_kind(folder, kind)
-            if on_kind is not None:
-                on_kind(frame, kind)
-        frame = fit_frame(model, path, calibration, curves, kinds=kinds, starts=starts, progress=progress,
-                          on_kind=finished, **options)
-        if folder is not None and frame.fits:
-            frame.save(folder)
-        if on_frame is not None:
-            on_frame(frame, folder)
-        starts = {**(starts or {}), **frame.fits}
-        results.append(frame)
-    if out is not None:
-        finish_run(out)
-        if len(frames) > 1:
-            from ..report.sequence import write_sequence_report
-            write_sequence_report(out)
-    return results
-
-
-RUN_FILE = "run.json"
-
-
-def start_run(out, frames, kinds, force=False):
-    """Claim the output folder for a fit run: refuse one that holds an earlier run's fits
-    (InvfaceError) unless ``force``, which removes them (the kind folders with a fit.json and
-    the report pages, nothing else); then write out/run.json {frames, kinds, finished: false},
-    which the reports read to name what a stopped run left out."""
-    import shutil
-    from ..report.runs import earlier_fits
-    out = Path(out)
-    old = earlier_fits(out)
-    if old and not force:
-        raise InvfaceError(f"{out}: holds an earlier run's fits ({len(old)} fit.json, e.g. {old[0]}); "
-                           "pass --force to replace them, or choose another output folder")
-    for f in old:
-        shutil.rmtree(f.parent)
-    for page in [*out.glob("index.html"), *out.glob("*/index.html"), *out.glob("weights_*.png"),
-                 *out.glob("activations_*.png")]:
-        page.unlink()
-    out.mkdir(parents=True, exist_ok=True)
-    write_object(out / RUN_FILE, {"frames": list(frames), "kinds": list(kinds), "finished": False})
-
-
-def finish_run(out):
-    """Mark out/run.json finished."""
-    import json
-    path = Path(out) / RUN_FILE
-    run = json.loads(path.read_text()) if path.is_file() else {}
-    write_object(path, dict(run, finished=True))

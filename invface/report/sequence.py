@@ -85,17 +85,26 @@ def write_sequence_report(run, title=None):
                 run / f"activations_{kind}.png", have, acts, f"{kind} model: muscle activations", "activation")
         pics = "".join(f'<figure><img src="{html.escape(p)}"><figcaption>{html.escape(c)}</figcaption></figure>'
                        for c, p in figs.items())
-        head = "<th>frame</th>" + "".join(f"<th>{html.escape(n)}</th>" for n, _ in COMPARE[1:])
+        head = "<th>frame</th>" + "".join(f"<th>{html.escape(n)}</th>" for n, _ in COMPARE[1:]) + "<th>flagged</th>"
         rows = "".join(
             f'<tr><td><a href="{html.escape(f)}/index.html">{html.escape(f)}</a></td>'
-            + "".join(f"<td>{html.escape(str(fn(summaries[f, kind])))}</td>" for _, fn in COMPARE[1:]) + "</tr>"
+            + "".join(f"<td>{html.escape(str(fn(summaries[f, kind])))}</td>" for _, fn in COMPARE[1:])
+            + f"<td>{html.escape(summaries[f, kind].get('flagged', ''))}</td></tr>"
             for f in have)
+        flagged = [f for f in have if summaries[f, kind].get("flagged")]
+        if flagged:
+            pics += (f"<p class=note>{len(flagged)} of {len(have)} frames flagged as implausible: "
+                     + html.escape(", ".join(flagged[:10])) + (" ..." if len(flagged) > 10 else "")
+                     + ". The curves file gives them controls interpolated from their neighbours.</p>")
         strip = "".join(
             f'<figure><a href="{html.escape(f)}/index.html"><img class=thumb src="{html.escape(f"{f}/{kind}/wipe.png")}">'
             f"</a><figcaption>{html.escape(f)}</figcaption></figure>"
             for f in have if (run / f / kind / "wipe.png").is_file())
         sections.append(f"<h2>{html.escape(kind)} model</h2><div class=grid>{pics}</div>"
                         f"<table><tr>{head}</tr>{rows}</table><div class=grid>{strip}</div>")
+    files = ", ".join(f'<a href="{html.escape(p.name)}">{html.escape(p.name)}</a>'
+                      for p in [run / "curves.csv", run / "curves.json", *sorted(run.glob("overlay_*.mp4"))]
+                      if p.is_file())
     title = title or f"invface sequence fit: {run.name} ({len(names)} frames)"
     page = (f"<!doctype html><html><head><meta charset=utf-8><title>{html.escape(title)}</title><style>"
             "body{font-family:sans-serif;margin:2em;max-width:1500px}table{border-collapse:collapse;margin:1em 0}"
@@ -104,6 +113,7 @@ def write_sequence_report(run, title=None):
             "figcaption{font-size:80%;color:#555}.note{background:#fff6d5;padding:6px}</style></head><body>"
             f"<h1>{html.escape(title)}</h1><p>Each frame is warm-started from the previous one's solution; "
             "frame names link to the frame's own report.</p>"
+            + (f"<p>Files: {files}</p>" if files else "")
             + "".join(f"<p class=note>{html.escape(n)}</p>" for n in run_notes(run))
             + "".join(sections) + "</body></html>")
     out = run / "index.html"
