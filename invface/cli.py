@@ -299,6 +299,11 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
         if len(paths) > 3:
             print("overlay video(s) (plate | render | wipe): " + ", ".join(str(p) for p in paths[2:-1]))
         print(f"sequence report: {paths[-1]}")
+        from .pipeline.sequence import curve_rows, jitter, sequence_records
+        for kind, recs in sequence_records(out, kinds).items():
+            if len(recs) >= 3:
+                print(f"{kind}: frame-to-frame jitter {jitter(curve_rows(recs)):.3f} (RMS second difference in "
+                      "units of 0.1 weight, 0.01 rad, 1 mm)")
         rms = [(k["curve_rms_px"], r["name"], kind) for r in rows for kind, k in r["kinds"].items()
                if k.get("curve_rms_px") is not None]
         if rms:
@@ -356,8 +361,10 @@ def cmd_fit_plate(args):
             cal = _calibrate(model, frame.plate, saved, 30, curves=curves, source=source,
                              lam_curves=args.curve_lambda)          # its warnings go into the fit's notes
         run = {"calibrated_on": frame.digest, "calibration_frame": frame.name}
+    if args.temporal < 0:
+        raise InvfaceError(f"--temporal {args.temporal}: give 0 (off) or a positive weight")
     options = dict(iterations=args.iterations, shading=not args.no_shading, lam_curves=args.curve_lambda,
-                   solver=args.solver)
+                   solver=args.solver, temporal=args.temporal)
     _fit_frames(model, clip, cal, kinds, out, options, curves=args.curves, force=args.restart,
                 workers=args.workers, scheduler=args.scheduler, run=run)
     return 0
@@ -419,7 +426,7 @@ CURVE_LAMBDA_HELP = ("weight regulariser lambda_1 of the curve fit, Eq. 15 (px^2
 
 
 def build_parser():
-    from .fit.lambdas import EQ13_LAMBDA
+    from .fit.lambdas import EQ13_LAMBDA, TEMPORAL_LAMBDA
     p = argparse.ArgumentParser(prog="invface", description="Anatomically based, differentiable face capture.")
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("build-model", help="build (or inspect) a FaceModel bundle")
@@ -486,6 +493,9 @@ def build_parser():
                                      "e.g. 0:72:2) or one index; default all")
     fp.add_argument("--neutral-frame", type=int, help="frame index to calibrate on when no --calib (default: the "
                                                       "most neutral-looking of 8 frames spread over the selection)")
+    fp.add_argument("--temporal", type=float, default=TEMPORAL_LAMBDA,
+                    help="weight of the temporal term between consecutive frames (px^2 per 0.1 weight, 0.01 rad "
+                         f"or 1 mm; scaled with the face like lambda_1; default {TEMPORAL_LAMBDA:g}, 0 = off)")
     fp.add_argument("--workers", type=int, help="fit frames on a local Dask cluster of this many processes "
                                                 "(contiguous chunks, one per worker; default: this process)")
     fp.add_argument("--scheduler", help="address of a running Dask scheduler (tcp://HOST:8786) to fit on; "

@@ -168,8 +168,9 @@ class CurveFit:
 class CurveObjective:
     """z -> (E_1 (n,) px with the lambda_1 rows, Jacobian) for named plate curves."""
 
-    def __init__(self, model, surface_model, camera, curves, lam):
+    def __init__(self, model, surface_model, camera, curves, lam, prior=None):
         self.model, self.sm, self.camera, self.lam = model, surface_model, camera, lam
+        self.prior = prior          # (centre z (size,), row weights (size,)): rows weight * (z - centre)
         self.vec = FitVector.of(model)
         self.curves = {k: v for k, v in curves.items() if k in model.curves}
         self.vertices = {k: np.asarray(model.curves[k]) for k in self.curves}
@@ -186,7 +187,12 @@ class CurveObjective:
         xr, Jall = posed_jacobian(self.sm, z, self.vec)
         rows, jac = self.rows(xr, Jall)
         reg, Jreg = regulariser(z, self.vec, self.lam)
-        return np.concatenate(rows + [reg]), np.vstack(jac + [Jreg])
+        rows, jac = rows + [reg], jac + [Jreg]
+        if self.prior is not None:
+            c, w = self.prior
+            rows.append(w * (np.asarray(z, float) - c))
+            jac.append(np.diag(w))
+        return np.concatenate(rows), np.vstack(jac)
 
     def rows(self, xr, Jall):
         """Signed distances (lists of (n,) px per curve) and their Jacobians ((n, z size) each)
@@ -248,7 +254,7 @@ def initial_pose(model, camera, curves, rotation=None, translation=None, samples
 
 
 def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=None, rotation=None,
-               translation=None, solve_pose=True, max_iter=200, progress=None):
+               translation=None, solve_pose=True, max_iter=200, previous=None, temporal=0.0, progress=None):
     """Solve Eq. 15: controls from plate curves, and first the rigid pose. Returns a CurveFit.
 
     The paper's pose comes from tracked features; here, with ``solve_pose``, it comes from
@@ -257,7 +263,11 @@ def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=N
     pose (with lambda_1 = 3600 the weights of a smile stay near 0.05 and the pose turns and
     shifts to make up for it: 0.06 rad and 12 mm off on the sample smile plate). Eq. 15 then
     solves the controls from that pose. The history logs both passes ("pass": "pose" or
-    "controls")."""
+    "controls").
+
+    In a sequence, ``previous`` (the previous frame's z) and ``temporal`` (px^2 per
+    ``FitVector.scales()`` unit^2) add temporal |(z - previous) / scales|^2 to both passes:
+    weights, jaw and pose change between frames only as far as the curves ask."""
     if not curves:
         raise InvfaceError("no plate curves to fit")
     sm, vec = model.surface_model(kind), FitVector.of(model)
@@ -270,11 +280,14 @@ def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=N
         if not pose:
             lo_[vec.pose], hi_[vec.pose] = z[vec.pose], z[vec.pose]
         log = (lambda h: progress(dict(h, **{"pass": name}))) if progress else None
-        res = dogleg(CurveObjective(model, sm, camera, curves, lam), z, lo_, hi_, max_iter=max_iter,
+        res = dogleg(CurveObjective(model, sm, camera, curves, lam, prior), z, lo_, hi_, max_iter=max_iter,
                      progress=log)
         history.extend(dict(h, **{"pass": name}) for h in res.history)
         return res
 
+    prior = None
+    if previous is not None and temporal > 0:
+        prior = (np.asarray(previous, float), np.sqrt(temporal) / vec.scales())
     tracked = None
     if solve_pose:
         _, rot, tr = vec.unpack(z)

@@ -5,6 +5,7 @@ Eq. 13 (scan):       |F* - x_R(w)|^2 + EQ13_LAMBDA |w|^2                       (
 Eq. 14 (calibration): |F* - F(gamma, c)|^2 + EQ14_LAMBDA |L c|^2               (pixels, vertices)
 Eq. 15 (curves):     |E_1(w^)|^2 + EQ15_LAMBDA_1 |w^|^2                         (px^2)
 Eq. 16 (shading):    |E_2|^2 + EQ16_LAMBDA_1 |E_1|^2 + EQ16_LAMBDA_2 |w - w^|^2 (linear light)
+sequence frames:     Eq. 15 + TEMPORAL_LAMBDA |(z - z_prev) / scales|^2                (px^2)
 
 The plate weights are the paper's for its plates. Eq. 15's residuals are pixels and Eq. 14's
 data term sums over the face's pixels, so both grow with the face's area in the image:
@@ -22,6 +23,8 @@ EQ15_TRACK_LAMBDA = 1.0     # curve fit's pose pass (ours, not the paper's): a w
                             # so the pose does not explain the expression
 EQ16_LAMBDA_1 = 1e-4        # shading: weight of the curve term E_1 (px^2)
 EQ16_LAMBDA_2 = 1.0         # shading: pull towards the curve solution w^
+TEMPORAL_LAMBDA = 1.0       # sequences (ours): |z - z_prev|^2 in FitVector.scales() units (0.1 weight,
+                            # 0.01 rad, 1 mm) added to Eq. 15, px^2 per unit^2 (scaled with the face)
 
 SAMPLE_EYE_PX = 224.0       # outer eye-corner distance (px) on the sample plates (720x540, 30 deg)
 

@@ -91,13 +91,15 @@ def check_plate(plate, path=""):
 
 def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, shading=True,
               max_iter_curves=200, max_iter_shading=25, spp=8,
-              lam_curves=EQ15_LAMBDA_1, solver="dogleg", progress=None):
+              lam_curves=EQ15_LAMBDA_1, solver="dogleg", temporal=0.0, progress=None):
     """Fit one plate. plate: ``render.plates.Plate`` (linear, undistorted; its mask, if any,
     restricts the shading term); calibration: ``fit.calibrate.Calibration`` (gamma, albedo);
     curves: {name: (n, 2) px} plate curves; kind: "blendshape" or "simulation"; start: the
     previous frame's PlateFit (sequence mode: its controls and pose start this frame);
     lam_curves: lambda_1 of Eq. 15 (px^2 per unit weight^2); solver: "dogleg" or "lbfgs" for
-    the shading stages (``fit.shading.fit_shading``). Returns a PlateFit."""
+    the shading stages (``fit.shading.fit_shading``); temporal: with a ``start``, the weight of
+    the temporal term of the curve stage (``fit_curves``; the shading stages are tied to the
+    curve stage's controls by Eq. 16's lambda_2). Returns a PlateFit."""
     if kind not in ("blendshape", "simulation"):
         raise InvfaceError(f"unknown model kind '{kind}': use 'blendshape' or 'simulation'")
     check_plate(plate.image, plate.path)
@@ -110,8 +112,9 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     p0 = None if start is None else start.p
     rot = calibration.rotation if start is None else start.rotation
     tr = calibration.translation if start is None else start.translation
+    previous = None if start is None else FitVector.of(model).pack(start.p, start.rotation, start.translation)
     cf = fit_curves(model, cam, curves, kind="blendshape", lam=lam_curves, p0=p0, rotation=rot,
-                    translation=tr, max_iter=max_iter_curves,
+                    translation=tr, max_iter=max_iter_curves, previous=previous, temporal=temporal,
                     progress=lambda h: say(dict(h, stage="curves")))
     history = [dict(h, stage="curves") for h in cf.history]
     seconds = {"curves": time.perf_counter() - t0}

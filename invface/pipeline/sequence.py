@@ -33,6 +33,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..errors import InvfaceError
+from ..fit.lambdas import TEMPORAL_LAMBDA
 from ..jsonfile import write_object
 from .clips import open_clip
 from .plates import _say, fit_frame, model_kinds
@@ -234,6 +235,7 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
         raise InvfaceError("one curves file names one plate; in a sequence put FRAME.curves.json beside each "
                            "frame (or let the detector find each frame's curves)")
     kinds = model_kinds(kinds)
+    options.setdefault("temporal", TEMPORAL_LAMBDA)
     inputs = run_hash(model, calibration, dict(options, curves=str(curves) if curves is not None else None))
     if out is not None:
         start_run(out, clip.names if len(clip) > 1 else [], kinds, force, inputs)
@@ -302,6 +304,21 @@ def curve_rows(records):
                 if r["flagged"]:
                     r[c] = float(np.interp(t[i], t[good], v))
     return rows
+
+
+def jitter(rows):
+    """Frame-to-frame jitter of one kind's curve rows (``curve_rows``): the RMS over frames and
+    entries of the second difference of the controls and pose in ``FitVector.scales()`` units
+    (0.1 weight, 0.01 rad, 1 mm); nan with fewer than 3 frames. A smooth motion sampled
+    finely has little; a fit that flickers between answers has much."""
+    from ..model.rig import JAW_NAMES
+    if len(rows) < 3:
+        return float("nan")
+    cols = [c for c in rows[0] if c.startswith("weight_")]
+    scale = [0.1] * len(cols) + [0.01, 0.01, 0.01, 0.001, 0.001, 0.001] + [0.01] * 3 + [0.001] * 3
+    cols += JAW_NAMES + [f"rotation_{a}" for a in "xyz"] + [f"translation_{a}" for a in "xyz"]
+    z = np.array([[float(r.get(c, 0.0)) for c in cols] for r in rows]) / np.array(scale)
+    return float(np.sqrt(np.mean(np.diff(z, 2, axis=0) ** 2)))
 
 
 def write_curves_files(out, kinds):

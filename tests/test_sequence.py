@@ -1,0 +1,182 @@
+"""Sequences (issue 28): video and folder input, resume after a kill, flags, curves files,
+the temporal term, the detector's video mode and a 2-process Dask LocalCluster."""
+import csv
+import json
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from conftest import SHARED
+from invface.errors import InvfaceError
+
+N_FRAMES = 6
+
+
+@pytest.fixture(scope="module")
+def clip(small_expressive_model, tmp_path_factory):
+    """A synthetic 6-frame clip (frames folder and MP4) of the small head, its model file and
+    the true calibration."""
+    from invface.fit.calibrate import Calibration
+    from invface.fit.samples import write_sample_clip
+    from invface.render.synthetic import skin_albedo, studio_light
+    m = small_expressive_model
+    root = tmp_path_factory.mktemp("clip")
+    m.save(root / "small.npz")
+    Calibration(gamma=studio_light(), albedo=skin_albedo(m)).save(root / "calib.npz")
+    frames, video = write_sample_clip(m, root, n=N_FRAMES, size=(240, 180))
+    return root, frames, video
+
+
+def cli(root, *args):
+    cmd = [sys.executable, "-m", "invface.cli", "fit-plate", *args, "--model", str(root / "small.npz"),
+           "--calib", str(root / "calib.npz"), "--no-shading"]
+    return cmd
+
+
+def test_frame_selection_and_clip_sources(clip, tmp_path):
+    from invface.pipeline.clips import open_clip, parse_frames
+    assert parse_frames("2:8:2", 10) == [2, 4, 6] and parse_frames(":3", 10) == [0, 1, 2]
+    assert parse_frames("-1", 10) == [9] and parse_frames(None, 3) == [0, 1, 2]
+    for bad in ("a:b", "5:2", "1:2:0", "12", "1:2:3:4"):
+        with pytest.raises(InvfaceError, match="--frames"):
+            parse_frames(bad, 10)
+    root, frames, video = clip
+    v = open_clip(video, "1:5:2")
+    assert v.kind == "video" and v.count == N_FRAMES and v.fps == 24 and v.indices == [1, 3]
+    got = list(v.frames())
+    assert [f.name for f in got] == ["clip.frame_000001", "clip.frame_000003"]
+    assert got[1].time == pytest.approx(3 / 24) and got[0].plate.image.shape == (180, 240, 3)
+    # the video's frames are the folder's frames through a lossy encoder
+    f3 = next(open_clip(frames, "3").frames())
+    assert f3.name == "frame_003" and np.abs(f3.plate.image - got[1].plate.image).mean() < 0.02
+    assert got[0].digest != got[1].digest and next(v.frames(0, 1)).digest == got[0].digest
+    (tmp_path / "broken.mp4").write_bytes(b"\x00" * 64)
+    with pytest.raises(InvfaceError, match="broken.mp4: not a readable video"):
+        open_clip(tmp_path / "broken.mp4")
+    (tmp_path / "notes.txt").write_text("x")
+    with pytest.raises(InvfaceError, match="notes.txt: not a plate image"):
+        open_clip(tmp_path / "notes.txt")
+
+
+def test_flags_and_curves_of_flagged_frames_come_from_their_neighbours():
+    from invface.pipeline.sequence import curve_rows, flag_reason, jitter
+    assert flag_reason(2.0, 0.01, [1.0, 1.2, 0.9]) == ""
+    assert "curve RMS 12.0 px" in flag_reason(12.0, 0.01, [1.0, 1.2, 0.9])
+    assert flag_reason(3.5, 0.01, [1.0, 1.0]) == ""                 # 3.5x but only 2.5 px more
+    assert "lip volume change +38.0 %" in flag_reason(1.0, 0.38, [])
+    recs = [{"_name": f"f{i}", "frame": i, "time": i / 24, "weights": {"smile": w}, "jaw": [0] * 6,
+             "rotation": [0, 0, 0], "translation": [0, 0, 0], "flagged": "x" if i == 2 else ""}
+            for i, w in enumerate([0.0, 0.2, 0.9, 0.6, 0.8])]
+    rows = curve_rows(recs)
+    assert rows[2]["weight_smile"] == pytest.approx(0.4) and rows[2]["flagged"] == "x"
+    assert rows[3]["weight_smile"] == 0.6
+    smooth = curve_rows([dict(r, weights={"smile": 0.1 * i}, flagged="") for i, r in enumerate(recs)])
+    raw = curve_rows([dict(r, flagged="") for r in recs])
+    assert jitter(smooth) < 1e-9 and jitter(rows) < 1e-9 and jitter(raw) > 1.0   # the flagged spike removed
+
+
+def test_video_fit_is_killed_and_resumed_and_writes_curves_and_overlay(clip, tmp_path):
+    """A run killed after two frames leaves them finished; the same command fits only the
+    others; other inputs are refused; the curves file has every frame with the fit's
+    controls; the overlay video has a frame per fitted frame."""
+    root, _, video = clip
+    out = tmp_path / "out"
+    proc = subprocess.Popen(cli(root, str(video), "-o", str(out)), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    t0 = time.time()
+    while len(list(out.glob("*/blendshape/fit.json"))) < 2 and proc.poll() is None and time.time() - t0 < 300:
+        time.sleep(0.2)
+    proc.kill()
+    log = proc.communicate()[0]
+    done = sorted(f.parent.parent.name for f in out.glob("*/blendshape/fit.json"))
+    assert 2 <= len(done) < N_FRAMES, log
+    assert not json.loads((out / "run.json").read_text())["finished"]
+    stamps = {n: (out / n / "blendshape/fit.json").stat().st_mtime_ns for n in done}
+    r = subprocess.run(cli(root, str(video), "-o", str(out)), capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert f"{len(done)} frame(s) finished before from the same inputs were skipped" in r.stdout
+    assert all((out / n / "blendshape/fit.json").stat().st_mtime_ns == t for n, t in stamps.items())
+    assert len(list(out.glob("*/blendshape/fit.json"))) == N_FRAMES
+    assert "resuming the run there" in r.stdout and "jitter" in r.stdout
+    # other inputs: refused, then --restart starts over
+    r = subprocess.run(cli(root, str(video), "-o", str(out), "--temporal", "0"), capture_output=True, text=True)
+    assert r.returncode == 2 and "made from other inputs" in r.stderr and "--restart" in r.stderr
+    with open(out / "curves.csv") as f:
+        table = list(csv.DictReader(f))
+    assert [int(t["frame"]) for t in table] == list(range(N_FRAMES)) and {t["kind"] for t in table} == {"blendshape"}
+    fit3 = json.loads((out / "clip.frame_000003/blendshape/fit.json").read_text())
+    assert float(table[3]["weight_lipCornerPull_L"]) == pytest.approx(fit3["weights"]["lipCornerPull_L"])
+    assert float(table[3]["time"]) == pytest.approx(3 / 24)
+    # each frame against its truth (clip.frame_NNNNNN.truth.json beside the video): curves only
+    assert fit3["truth"]["shape_median_mm"] < 0.5 and fit3["curve_rms_px"] < 1.0
+    curves = json.loads((out / "curves.json").read_text())["blendshape"]
+    assert len(curves["rows"]) == N_FRAMES and "weight_lipCornerPull_L" in curves["columns"]
+    import cv2
+    cap = cv2.VideoCapture(str(out / "overlay_blendshape.mp4"))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == N_FRAMES and cap.get(cv2.CAP_PROP_FRAME_WIDTH) > 3 * 300
+    page = (out / "index.html").read_text()
+    assert 'href="curves.csv"' in page and 'href="overlay_blendshape.mp4"' in page
+
+
+def test_temporal_term_lowers_jitter_without_losing_the_curves(small_expressive_model, clip):
+    from invface.fit.calibrate import Calibration
+    from invface.pipeline import fit_sequence
+    from invface.pipeline.sequence import curve_rows, jitter
+    root, frames, _ = clip
+    cal = Calibration.load(root / "calib.npz")
+    res = {}
+    for t in (0.0, 1.0):
+        rows = fit_sequence(small_expressive_model, frames, cal, shading=False, temporal=t)
+        recs = [{"_name": r["name"], "frame": r["index"], "time": r["time"],
+                 **r["fit"]["blendshape"].summary()} for r in rows]
+        res[t] = (jitter(curve_rows(recs)), max(r["kinds"]["blendshape"]["curve_rms_px"] for r in rows))
+    assert res[1.0][0] < 0.8 * res[0.0][0], res
+    assert res[1.0][1] < res[0.0][1] + 0.3, res
+
+
+def test_two_process_local_cluster_matches_the_single_process_run(small_expressive_model, clip, tmp_path):
+    """--workers 2 (a distributed.LocalCluster) fits the same frames: the chunks' first
+    frames are refitted from the chunk before, and the answers agree with one process."""
+    pytest.importorskip("distributed")
+    from invface.fit.calibrate import Calibration
+    from invface.pipeline.clips import open_clip
+    from invface.pipeline.distributed import chunk_bounds, fit_sequence_distributed
+    from invface.pipeline.sequence import fit_frames, run_hash, sequence_records
+    assert chunk_bounds(7, 3) == [(0, 2), (2, 5), (5, 7)] and chunk_bounds(2, 5) == [(0, 1), (1, 2)]
+    root, frames, _ = clip
+    m, cal = small_expressive_model, Calibration.load(root / "calib.npz")
+    opts = dict(shading=False, temporal=1.0)
+    inputs = run_hash(m, cal, opts)
+    c = open_clip(frames, "0:4")
+    rows = fit_sequence_distributed(m, c, cal, tmp_path / "two", inputs=inputs, workers=2, **opts)
+    assert [r["name"] for r in rows] == c.names
+    recs = sequence_records(tmp_path / "two", ["blendshape"])["blendshape"]
+    assert [r["_name"] for r in recs] == c.names and recs[2].get("second_pass") and not recs[1].get("second_pass")
+    fit_frames(m, c, cal, tmp_path / "one", inputs=inputs, **opts)
+    ones = sequence_records(tmp_path / "one", ["blendshape"])["blendshape"]
+    for a, b in zip(recs, ones):
+        wa, wb = np.array(list(a["weights"].values())), np.array(list(b["weights"].values()))
+        assert np.abs(wa - wb).max() < 0.05 and abs(a["curve_rms_px"] - b["curve_rms_px"]) < 0.1
+
+
+@pytest.mark.skipif(not (SHARED / "data/real/video/single_face.mp4").is_file(), reason="real clip not available")
+def test_detector_tracks_the_real_clip_in_video_mode():
+    """The detector's video mode on the real phone clip: landmarks on every frame of a
+    stretch, a steady track (frame-to-frame motion of the eye corners within a few px), and a
+    time that goes back starts a new track instead of failing."""
+    from invface.fit.landmarks import LandmarkTracker, available
+    from invface.pipeline.clips import open_clip
+    from invface.render.plates import linear_to_srgb
+    if not available():
+        pytest.skip("landmark detector not installed")
+    c = open_clip(SHARED / "data/real/video/single_face.mp4", "0:12")
+    with LandmarkTracker() as track:
+        pts = [track(linear_to_srgb(f.plate.image), f.time, f.name) for f in c.frames()]
+        again = track(linear_to_srgb(next(c.frames(0, 1)).plate.image), 0.0)
+    pts = np.array(pts)
+    assert pts.shape == (12, 478, 2) and np.abs(again - pts[0]).max() < 1.0
+    step = np.linalg.norm(np.diff(pts[:, [33, 263]], axis=0), axis=2)
+    assert step.max() < 8.0, step.max()
