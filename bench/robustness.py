@@ -1,7 +1,7 @@
 """Does the simulation answer everywhere in the fitting box? (issue 25)
 
     python bench/robustness.py [--model default|ict|FILE.npz] [--count 256] [--singles] [--pairs]
-                               [--resolution 1.0]
+                               [--resolution 1.0] [--results FILE.jsonl]
 
 Cold solves (each from rest, as a freshly loaded model) of the driven simulation at:
   * ``--count`` quasi-random control vectors (scrambled Sobol) over the box the fits use:
@@ -15,12 +15,15 @@ tets, the smallest volume ratio, load steps used, the deepest penetration of an 
 (how far a flesh vertex ended up behind the surface it touches), seconds (median / max), and
 every failure or load-stepped solve.
 
-``--model ict`` builds an actor from ../shared/data/ict-facekit's neutral with its imported
+``--results FILE.jsonl`` appends one line per case as it finishes and skips the cases already
+there, so a sweep of several hours can be stopped and resumed (the tallies cover every case in
+the file). ``--model ict`` builds an actor from ../shared/data/ict-facekit's neutral with its imported
 blendshapes (``build-model --blendshapes``).
 """
 from __future__ import annotations
 
 import argparse
+import json
 import tempfile
 import time
 from itertools import combinations
@@ -93,14 +96,22 @@ def main():
     ap.add_argument("--count", type=int, default=256)
     ap.add_argument("--singles", action="store_true")
     ap.add_argument("--pairs", action="store_true")
+    ap.add_argument("--results", help="JSON-lines file: append each case, skip the cases already in it")
     a = ap.parse_args()
     t0 = time.perf_counter()
     model = load(a.model, a.resolution)
     ds = model.surface_model("simulation")
     print(f"model {a.model}: {len(model.tets)} tets, {len(model.blendshape_names)} blendshapes, "
           f"{len(ds.sim.collisions or [])} contacts; ready in {time.perf_counter() - t0:.0f} s", flush=True)
-    rows = []
+    rows, done = [], {}
+    if a.results and Path(a.results).is_file():
+        for line in Path(a.results).read_text().splitlines():
+            r = json.loads(line)
+            done[r[0], r[1]] = tuple(r)
     for group, label, p in cases(model, a.count, a.singles, a.pairs):
+        if (group, label) in done:
+            rows.append(done[group, label])
+            continue
         t = time.perf_counter()
         try:
             r = ds.solve(p, warm=None, raise_on_failure=False).sim
@@ -110,8 +121,11 @@ def main():
             continue
         sec = time.perf_counter() - t
         depth = penetration(ds.sim.collisions, r.X, model.jaw_matrix(r.jaw))
-        rows.append((group, label, r.converged, r.residuals[-1] if r.residuals else np.nan, r.inverted,
-                     r.min_J, r.load_steps, sec, depth))
+        rows.append((group, label, bool(r.converged), float(r.residuals[-1]) if r.residuals else np.nan,
+                     int(r.inverted), float(r.min_J), int(r.load_steps), sec, depth))
+        if a.results:
+            with open(a.results, "a") as f:
+                f.write(json.dumps(rows[-1]) + "\n")
         if not r.converged or r.load_steps:
             print(f"  {group} {label}: {r.report()}", flush=True)
         if len(rows) % 32 == 0:
