@@ -70,6 +70,47 @@ def test_shading_gradient_matches_finite_differences(small_expressive_model):
         assert grad[idx] == pytest.approx(fd, rel=rel), (idx, grad[idx], fd)
 
 
+def test_huber_rows_make_the_huber_loss_and_bound_an_occluders_pull(small_expressive_model):
+    """psi(r)^2 / 2 is the Huber loss and psi psi' its derivative (central differences); a
+    bright card over the lower lip (an occluder) pulls on the weights at the truth less than
+    half as hard with the robust rows as with plain squares (measured: 0.22 of it); the
+    objective's gradient with robust rows against central differences."""
+    from invface.fit.shading import huber_rows
+    r = np.linspace(-0.5, 0.5, 101)
+    psi, dpsi = huber_rows(r, 0.1)
+    huber = np.where(np.abs(r) <= 0.1, r * r / 2, 0.1 * np.abs(r) - 0.005)
+    assert np.allclose(psi ** 2 / 2, huber) and np.allclose(psi * dpsi, np.clip(r, -0.1, 0.1))
+    h = 1e-6
+    fd = ((huber_rows(r + h, 0.1)[0] ** 2 - huber_rows(r - h, 0.1)[0] ** 2) / 4 / h)
+    assert np.allclose(fd, psi * dpsi, atol=1e-6)
+    m = small_expressive_model
+    cam, p, g, a, plate = _shading_scene(m)
+    z = np.r_[p, ROT, TR]                                   # the truth: no pull but the occluder's
+    uv, _ = cam.project(_truth(m)[1][1][m.curves["lip_outer_lower"]])
+    c0, c1 = uv.min(0).astype(int) - 4, uv.max(0).astype(int) + 4
+    occluded = plate.copy()
+    occluded[c0[1]:c1[1], c0[0]:c1[0]] = 0.9                # a white card over the lower lip
+    grads = {}
+    for robust in (None, 0.1):
+        obj = ShadingObjective(m, m.surface_model("blendshape"), cam, occluded, g, a, p, spp=32,
+                               silhouette_spp=4, robust=robust)
+        grads[robust] = obj(z)[1][:len(p)]
+    # the gradient of the robust rows against central differences, away from the truth with
+    # a threshold low enough that many rows are linear (weights where interior shading rules)
+    obj = ShadingObjective(m, m.surface_model("blendshape"), cam, plate, g, a, np.zeros(len(p)), spp=32,
+                           silhouette_spp=4, robust=0.01)
+    z6 = np.r_[p * 0.6, ROT, TR]
+    grad = obj(z6)[1]
+    r = obj._render(posed_surface(obj.sm, z6, obj.vec)[1])[2]
+    assert (np.abs(r) > 0.01).mean() > 0.005                    # rows in the linear part
+    for name in ("lipCornerPull_L", "browInnerUp_L"):
+        k = m.blendshape_names.index(name)
+        d = np.zeros_like(z6)
+        d[k] = 0.01
+        assert grad[k] == pytest.approx((obj(z6 + d)[0] - obj(z6 - d)[0]) / 0.02, rel=0.05), name
+    assert np.linalg.norm(grads[0.1]) < 0.5 * np.linalg.norm(grads[None]), grads
+
+
 def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_model):
     """The dogleg's forward-mode image Jacobian: its columns applied to the residual give
     the adjoint gradient of the same render, and their sizes match finite differences of
@@ -79,7 +120,7 @@ def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_m
     P = len(p)
     sm = m.surface_model("blendshape")
     obj = ShadingObjective(m, sm, cam, plate, g, a, np.zeros(P), lam2=0.0, spp=16, silhouette_spp=4,
-                           jacobian_spp=16)
+                           jacobian_spp=16, robust=None)
     z = np.r_[p * 0.6, ROT, TR]
     _, grad = obj(z)
     xr, Jall = posed_jacobian(sm, z, FitVector.of(m))
@@ -100,6 +141,17 @@ def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_m
         vec = FitVector.of(m)
         fd = (obj._render(posed_surface(sm, z + d, vec)[1])[2] - obj._render(posed_surface(sm, z - d, vec)[1])[2]) / (2 * h)
         assert np.linalg.norm(C[idx]) == pytest.approx(np.linalg.norm(fd), rel=0.15), idx
+    # Huber rows (a threshold most rows here exceed): g = C psi psi', H = C diag(psi'^2) C^T
+    from invface.fit.shading import huber_rows
+    robust = ShadingObjective(m, sm, cam, plate, g, a, np.zeros(P), lam2=0.0, spp=16, silhouette_spp=4,
+                              jacobian_spp=16, robust=0.01)
+    psi, dpsi = huber_rows(r, 0.01)
+    assert (dpsi < 1).mean() > 0.005
+    ne = robust.normal_equations(z)
+    Cw = C.astype(np.float64) * dpsi
+    np.testing.assert_allclose(ne.gradient, Cw @ psi, rtol=1e-4, atol=1e-6 * np.abs(ne.gradient).max())
+    np.testing.assert_allclose(ne.hessian, Cw @ Cw.T, rtol=1e-4, atol=1e-7 * np.abs(ne.hessian).max())
+    assert ne.cost == pytest.approx(0.5 * float(psi @ psi), rel=1e-5)
 
 
 def test_shading_mask_restricts_the_data_term_and_its_gradient(small_expressive_model):
