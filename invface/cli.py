@@ -231,17 +231,13 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
     run.json (what the calibration was made from)."""
     from .pipeline import open_clip
     from .pipeline.distributed import fit_sequence_distributed
-    from .pipeline.sequence import (finish_run, fit_frames, read_run, run_hash, start_run,
-                                    write_sequence_outputs)
-    from .jsonfile import write_object
+    from .pipeline.sequence import finish_run, fit_frames, run_hash, start_run, write_sequence_outputs
     clip = open_clip(clip)
     if curves is not None and len(clip) > 1:
         raise InvfaceError("--curves names one plate; in a sequence put FRAME.curves.json beside each frame "
                            "(or let the detector track the curves)")
     inputs = run_hash(model, cal, dict(options, curves=str(curves) if curves is not None else None))
-    resumed = start_run(out, clip.names if len(clip) > 1 else [], kinds, force, inputs)
-    if run:
-        write_object(out / "run.json", dict(read_run(out), **run))
+    resumed = start_run(out, clip.names if len(clip) > 1 else [], kinds, force, inputs, extra=run)
     if resumed:
         print(f"{out}: resuming the run there (same inputs); finished frames are skipped "
               "(--restart starts over)", flush=True)

@@ -139,8 +139,9 @@ class Clip:
         cam = cam if cam is not None else self.camera
         try:
             pos = sel[0]
-            if pos:
-                cap.set(cv2.CAP_PROP_POS_FRAMES, pos)
+            if pos and not (cap.set(cv2.CAP_PROP_POS_FRAMES, pos) and int(cap.get(cv2.CAP_PROP_POS_FRAMES)) == pos):
+                cap.release()                  # no exact seek in this file: decode from the start
+                cap, pos = cv2.VideoCapture(str(self.source)), 0
             wanted = set(sel)
             while pos <= sel[-1]:
                 ok, bgr = cap.read()

@@ -69,13 +69,13 @@ def read_run(out):
         return {}
 
 
-def start_run(out, frames, kinds, force=False, inputs=None):
+def start_run(out, frames, kinds, force=False, inputs=None, extra=None):
     """Claim the output folder for a fit run. One with an earlier run's fits is resumed when
     its run.json records the same ``inputs`` hash (``run_hash``): the finished frames stay and
     True is returned; otherwise it is refused (InvfaceError) unless ``force``, which removes
     the fits (the kind folders with a fit.json) and the report pages, nothing else. Then
-    out/run.json {frames, kinds, inputs, finished: false} is written; the reports read it to
-    name what a stopped run left out."""
+    out/run.json {frames, kinds, inputs, finished: false, **extra} is written; the reports read
+    it to name what a stopped run left out."""
     import shutil
     from ..report.runs import earlier_fits
     out = Path(out)
@@ -92,7 +92,7 @@ def start_run(out, frames, kinds, force=False, inputs=None):
             page.unlink()
     out.mkdir(parents=True, exist_ok=True)
     write_object(out / RUN_FILE, {"frames": list(frames), "kinds": list(kinds), "inputs": inputs,
-                                  "finished": False})
+                                  "finished": False, **(extra or {})})
     return resume
 
 
@@ -220,16 +220,18 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
 
 
 def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), curves=None, progress=None,
-                 on_kind=None, on_frame=None, force=False, camera=None, select=None, keep=True, **options):
-    """Fit a plate sequence in order on this process (``fit_frames``). frames: a Clip, a
+                 on_kind=None, on_frame=None, force=False, camera=None, select=None, keep=True, workers=None,
+                 scheduler=None, **options):
+    """Fit a plate sequence in order (``fit_frames``). frames: a Clip, a
     video, folder or image path (``open_clip``, with ``select`` "START:STOP[:STEP]" and
     ``camera``), or a list of plate paths; curves: for a single plate only (a sequence takes
     FRAME.curves.json beside each frame, or the detector, tracking frame to frame); out:
     see ``fit_frames``; an out folder with an earlier run's fits is resumed when they were
     made from the same inputs, refused otherwise unless ``force`` (``start_run``); then the
-    sequence outputs (``write_sequence_outputs``). Returns the per-frame summaries of
-    ``fit_frames``, each with its FrameFit as "fit" unless not ``keep`` (a long clip's fits
-    are on disk: their renders would fill the memory)."""
+    sequence outputs (``write_sequence_outputs``); ``workers`` or ``scheduler``: on a Dask
+    cluster (``distributed.fit_sequence_distributed``; needs ``out``). Returns the per-frame
+    summaries of ``fit_frames``, each with its FrameFit as "fit" when fitted on this process
+    and ``keep`` (a long clip's fits are on disk: their renders would fill the memory)."""
     clip = _clip(frames, select, camera)
     if curves is not None and len(clip) > 1:
         raise InvfaceError("one curves file names one plate; in a sequence put FRAME.curves.json beside each "
@@ -239,8 +241,13 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
     inputs = run_hash(model, calibration, dict(options, curves=str(curves) if curves is not None else None))
     if out is not None:
         start_run(out, clip.names if len(clip) > 1 else [], kinds, force, inputs)
-    rows = fit_frames(model, clip, calibration, out, kinds, curves=curves, inputs=inputs, keep=keep,
-                      progress=progress, on_kind=on_kind, on_frame=on_frame, **options)
+    if (workers or scheduler) and len(clip) > 1:
+        from .distributed import fit_sequence_distributed
+        rows = fit_sequence_distributed(model, clip, calibration, out, kinds, inputs=inputs, workers=workers or 1,
+                                        scheduler=scheduler, progress=progress, **options)
+    else:
+        rows = fit_frames(model, clip, calibration, out, kinds, curves=curves, inputs=inputs, keep=keep,
+                          progress=progress, on_kind=on_kind, on_frame=on_frame, **options)
     if out is not None:
         finish_run(out)
         if len(clip) > 1:
