@@ -118,6 +118,13 @@ def test_face_mask_fills_the_detector_oval():
     mask = face_mask(pts, 80, 100)
     assert mask.sum() == pytest.approx(np.pi * 30 * 20, rel=0.06)        # outline pixels included
     assert mask[40, 50] and not mask[5, 5] and not mask[40, 85]
+    # the mouth opening (between the inner lip contours) is left out
+    up, lo = CURVE_INDICES["lip_inner_upper"], CURVE_INDICES["lip_inner_lower"]
+    u = np.linspace(-8, 8, len(up))
+    pts[up], pts[lo] = np.c_[50 + u, 48 - 3 * np.cos(u / 8 * np.pi / 2)], np.c_[50 + u, 48 + 3 * np.cos(u / 8 * np.pi / 2)]
+    holed = face_mask(pts, 80, 100)
+    assert not holed[48, 50] and holed[40, 50] and face_mask(pts, 80, 100, holes=False)[48, 50]
+    assert (mask & ~holed).sum() == pytest.approx(2 / 3 * 16 * 6, rel=0.35)    # the lens between them
     c = curves_from_landmarks(np.arange(956, dtype=float).reshape(478, 2))
     assert set(c) == set(CURVE_INDICES) and {"nose_bridge", "nose_base", "jaw_line"} <= set(c)
 

@@ -18,8 +18,9 @@ absorbed the difference in proportions (astronaut photo: 0.58 rad with eyes and 
 with the nose added, -0.01 with the jaw line too; the photo is frontal). The jaw line is the
 face's silhouette, which the model's fixed skin curve matches for near-frontal views only.
 
-``face_mask`` rasterises the detector's whole face oval (hairline to chin): on a photo it
-keeps hair and background out of the calibration and the shading fit.
+``face_mask`` rasterises the detector's whole face oval (hairline to chin) less the eye and
+mouth openings: on a photo it keeps hair, background, eyeballs and teeth out of the
+calibration and the shading fit.
 """
 from __future__ import annotations
 
@@ -150,10 +151,19 @@ def detect_curves(image_srgb, name="plate"):
     return curves_from_landmarks(detect_landmarks(image_srgb, name))
 
 
-def face_mask(points, height, width):
-    """(height, width) bool: inside the detector's face oval (landmarks (478, 2) px)."""
+def face_mask(points, height, width, holes=True):
+    """(height, width) bool: inside the detector's face oval (landmarks (478, 2) px), less the
+    eye openings (between the lid contours) and the mouth opening (between the inner lip
+    contours) with ``holes``: eyeballs, teeth and the mouth's inside are not skin, and the
+    model has none of them (its eye slits and mouth show what is behind the head), so their
+    pixels would pull the lids and lips towards the wrong answer in calibration and shading."""
     import cv2
     mask = np.zeros((height, width), np.uint8)
-    cv2.fillPoly(mask, [np.round(points[FACE_OVAL] * 16).astype(np.int32)], 1, lineType=cv2.LINE_8,
-                 shift=4)
+    poly = lambda ids: np.round(points[ids] * 16).astype(np.int32)
+    cv2.fillPoly(mask, [poly(FACE_OVAL)], 1, lineType=cv2.LINE_8, shift=4)
+    if holes:
+        for upper, lower in (("eye_R_upper", "eye_R_lower"), ("eye_L_upper", "eye_L_lower"),
+                             ("lip_inner_upper", "lip_inner_lower")):
+            ring = CURVE_INDICES[upper] + CURVE_INDICES[lower][::-1]
+            cv2.fillPoly(mask, [poly(ring)], 0, lineType=cv2.LINE_8, shift=4)
     return mask.astype(bool)
