@@ -146,8 +146,14 @@ def test_two_process_local_cluster_matches_the_single_process_run(small_expressi
     from invface.pipeline.distributed import chunk_bounds, fit_sequence_distributed
     from invface.pipeline.sequence import fit_frames, run_hash, sequence_records
     assert chunk_bounds(7, 3) == [(0, 2), (2, 5), (5, 7)] and chunk_bounds(2, 5) == [(0, 1), (1, 2)]
+    import pickle
     root, frames, _ = clip
     m, cal = small_expressive_model, Calibration.load(root / "calib.npz")
+    # the model travels to the workers pickled, also after its simulation was used (the
+    # solver's native handles stay behind; the copy rebuilds its surface models)
+    p = m.parameters({"lipCornerPull_L": 0.3})
+    x = m.surface_model("simulation").surface(p)
+    assert np.abs(pickle.loads(pickle.dumps(m)).surface_model("simulation").surface(p) - x).max() < 1e-9
     opts = dict(shading=False, temporal=1.0)
     inputs = run_hash(m, cal, opts)
     c = open_clip(frames, "0:4")

@@ -132,6 +132,14 @@ class FaceModel:
         c = Controls.coerce(w, self.blendshape_names)
         return np.concatenate([c.weight_vector(self.blendshape_names), c.jaw])
 
+    def __getstate__(self):
+        """Pickle the model's data only: the surface models and the embedding are rebuilt on
+        first use (a simulation's solver holds native handles that cannot be pickled; a Dask
+        worker receives the model this way)."""
+        state = dict(self.__dict__)
+        state["_surface_models"], state["_embedding"] = {}, None
+        return state
+
     def surface_model(self, kind="blendshape"):
         """The model x(p) of ``kind`` (created once per FaceModel): parameter_names,
         surface(p), surface_jacobian(p) (P,V,3) and surface_vjp(p, gx) (P,)."""
