@@ -63,7 +63,7 @@ def _client(workers, scheduler):
             return Client(scheduler, timeout="20s"), None
         except (OSError, TimeoutError) as e:
             raise InvfaceError(f"--scheduler {scheduler}: no Dask scheduler answers there ({e})") from None
-    cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None,
+    cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.ERROR)
     return Client(cluster), cluster
 
