@@ -8,6 +8,11 @@ import numpy as np
 from ..errors import ControlsError
 
 
+# one unit of each fit-vector entry (``FitVector.scales``): weight, jaw (3 rad, 3 m), head rotation
+# (rad), head translation (m)
+WEIGHT_SCALE, JAW_SCALES, ROTATION_SCALE, TRANSLATION_SCALE = 0.1, (0.01, 0.01, 0.01, 0.001, 0.001, 0.001), 0.01, 0.001
+
+
 @dataclass
 class Controls:
     """Controls w = (b, j) plus the rigid pose used by the renderer.
@@ -156,9 +161,9 @@ class FitVector:
     def scales(self):
         """One unit of each entry for the optimisers' variables: weights 0.1, jaw rotations
         0.01 rad, jaw translations 1 mm, head rotation 0.01 rad, head translation 1 mm."""
-        s = np.full(self.size, 0.1)
-        s[self.jaw] = [0.01, 0.01, 0.01, 0.001, 0.001, 0.001]
-        s[self.rotation], s[self.translation] = 0.01, 0.001
+        s = np.full(self.size, WEIGHT_SCALE)
+        s[self.jaw] = JAW_SCALES
+        s[self.rotation], s[self.translation] = ROTATION_SCALE, TRANSLATION_SCALE
         return s
 
     def hinge(self, z_or_p):

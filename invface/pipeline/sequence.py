@@ -318,11 +318,12 @@ def jitter(rows):
     entries of the second difference of the controls and pose in ``FitVector.scales()`` units
     (0.1 weight, 0.01 rad, 1 mm); nan with fewer than 3 frames. A smooth motion sampled
     finely has little; a fit that flickers between answers has much."""
+    from ..model.controls import JAW_SCALES, ROTATION_SCALE, TRANSLATION_SCALE, WEIGHT_SCALE
     from ..model.rig import JAW_NAMES
     if len(rows) < 3:
         return float("nan")
     cols = [c for c in rows[0] if c.startswith("weight_")]
-    scale = [0.1] * len(cols) + [0.01, 0.01, 0.01, 0.001, 0.001, 0.001] + [0.01] * 3 + [0.001] * 3
+    scale = [WEIGHT_SCALE] * len(cols) + list(JAW_SCALES) + [ROTATION_SCALE] * 3 + [TRANSLATION_SCALE] * 3
     cols += JAW_NAMES + [f"rotation_{a}" for a in "xyz"] + [f"translation_{a}" for a in "xyz"]
     z = np.array([[float(r.get(c, 0.0)) for c in cols] for r in rows]) / np.array(scale)
     return float(np.sqrt(np.mean(np.diff(z, 2, axis=0) ** 2)))
