@@ -210,6 +210,29 @@ def test_wide_open_jaw_starts_inside_the_energy_domain(sim):
     assert sim.solve(jaw=wider, warm=r).converged
 
 
+def test_load_step_predictor_is_second_order(sim):
+    """Issue 25: a load step starts from the Euler predictor X + dX/dt h (the tangent of the
+    equilibrium path, sim._tangent_start); its residual shrinks as h^2 (the jaw-skinned start's
+    as h), so a step near a crushed tet starts nearer its equilibrium."""
+    acts = np.array([0.6 if n.startswith("zygomaticus_major") else 0.0 for n in sim.muscle_names])
+    jaw = np.array([0.1, 0, 0, 0, 0, 0])
+    r = sim.solve(acts, jaw=jaw, rtol=1e-10)
+    secs = dict(assembly=0.0, factor=0.0, solve=0.0)
+    residual = {}
+    for h in (0.04, 0.02):
+        a1, j1 = acts + h, jaw + [h, 0, 0, 0, 0, 0]
+        pred = sim._tangent_start(r.X, r.newton_data, (acts, jaw, None), (a1, j1, None), secs)
+        skin = sim._start(r.X, jaw, j1)
+        jm = sim.model.jaw_matrix(j1)
+        residual[h] = [np.linalg.norm(sim._total(x, a1, jm, None, 1)[1]) for x in (pred, skin)]
+        fixed = sim.dof_of_vertex < 0
+        assert np.abs(pred[fixed] - sim.constrained_positions(j1)[fixed]).max() < 1e-12
+        assert sim._better_start(skin, pred, a1, j1, None) is pred
+    (p1, s1), (p2, s2) = residual[0.04], residual[0.02]
+    assert 3.0 < p1 / p2 < 5.0 and s1 / s2 < 2.5       # second order against first order
+    assert p2 < 0.2 * s2
+
+
 def test_contact_gap_and_energy_derivatives_match_finite_differences():
     """The plane gap of a point and a triangle and the gated penalty of a contact are C2
     functions of the 12 coordinates: gradients and Hessians against central differences."""

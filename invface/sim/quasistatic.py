@@ -253,18 +253,26 @@ class Simulator:
         out = self._newton(self._start(X0, j0, jaw), act, jaw, tracks, rtol, max_iter, progress, secs)
         steps, total = 0, out[2]
         if not out[1]:
+
+            def inputs(t):
+                tr = None if tracks is None else Tracks(tracks.vertices, T0 + t * (tracks.targets - T0),
+                                                        tracks.stiffness)
+                return a0 + t * (act - a0), j0 + t * (jaw - j0), tr
+
             X, t, h = X0, 0.0, 0.5
+            H = warm.newton_data if warm is not None and warm.converged else None
             while h >= 1.0 / self.MIN_STEP:
                 t1 = min(1.0, t + h)
-                a_t, j_t = a0 + t1 * (act - a0), j0 + t1 * (jaw - j0)
-                tr = None if tracks is None else Tracks(tracks.vertices, T0 + t1 * (tracks.targets - T0),
-                                                        tracks.stiffness)
-                j_prev = j0 + t * (jaw - j0)
-                step = self._newton(self._start(X, j_prev, j_t), a_t, j_t, tr, rtol if t1 == 1.0 else 1e-4,
+                a_t, j_t, tr = inputs(t1)
+                start = self._start(X, inputs(t)[1], j_t)
+                if H is not None:
+                    start = self._better_start(start, self._tangent_start(X, H, inputs(t), inputs(t1), secs),
+                                               a_t, j_t, tr)
+                step = self._newton(start, a_t, j_t, tr, rtol if t1 == 1.0 else 1e-4,
                                     max_iter, progress, secs)
                 steps, total = steps + 1, total + step[2]
                 if step[1]:
-                    X, t, h = step[0], t1, 2 * h
+                    X, t, h, H = step[0], t1, 2 * h, step[5]
                     if t1 == 1.0:
                         out = step
                         break
@@ -314,6 +322,50 @@ class Simulator:
             d[v[keep & ~jawed]] = 0.0
         return start
 
+    def _tangent_start(self, X, H, here, there, secs, eps=1e-3):
+        """Start state (N,3) for the inputs ``there`` = (activations, jaw, Tracks or None) from
+        an equilibrium X at the inputs ``here``, with H the exact Newton matrix data at X: the
+        Euler predictor of continuation methods, X^U + dX^U/dt along the straight path between
+        the inputs (dX^U/dt = -H^-1 dr/dt, dr/dt by a difference of the residual over ``eps``
+        of the path), the constrained vertices placed exactly. None when H is not positive
+        definite or the residual is not finite."""
+        (a, j, tr), (a1, j1, tr1) = here, there
+        je = j + eps * (j1 - j)
+        fixed = self.dof_of_vertex < 0
+        Xe = X.copy()
+        Xe[fixed] = self.constrained_positions(je)[fixed]
+        tre = None if tr is None else Tracks(tr.vertices, tr.targets + eps * (tr1.targets - tr.targets),
+                                             tr1.stiffness)
+        t = time.perf_counter()
+        _, g0, _ = self._total(X, a, self.model.jaw_matrix(j), tr, 1)
+        _, ge, _ = self._total(Xe, a + eps * (a1 - a), self.model.jaw_matrix(je), tre, 1)
+        secs["assembly"] += time.perf_counter() - t
+        if g0 is None or ge is None or not np.all(np.isfinite(ge - g0)):
+            return None
+        t = time.perf_counter()
+        try:
+            self._solver.factor(H)
+        except linsolve.NotSPD:
+            return None
+        finally:
+            secs["factor"] += time.perf_counter() - t
+        t = time.perf_counter()
+        dU = -self._solver.solve((ge - g0) / eps)
+        secs["solve"] += time.perf_counter() - t
+        out = X.copy()
+        out[fixed] = self.constrained_positions(j1)[fixed]
+        out[self.free] += dU.reshape(-1, 3)
+        return out
+
+    def _better_start(self, a, b, act, jaw, tracks):
+        """Of two start states (b may be None), the one of lower total energy (an inverted
+        one's is infinite): the nearer the target's minimum, the fewer Newton steps."""
+        if b is None:
+            return a
+        jm = self.model.jaw_matrix(jaw)
+        Ea, Eb = (self._total(x, act, jm, tracks, 0)[0] for x in (a, b))
+        return b if Eb < Ea or not np.isfinite(Ea) else a
+
     def _newton(self, X, act, jaw, tracks, rtol, max_iter, progress, secs):
         """Newton from X: (X, converged, iterations, relative residuals, energy, matrix data).
 
@@ -330,7 +382,7 @@ class Simulator:
                 break
             r = float(np.linalg.norm(g))
             if ref is None:
-                ref = max(r, self.force_scale * np.sqrt(len(g)))
+                ref = self.force_scale * np.sqrt(len(g))
             residuals.append(r / ref)
             if progress:
                 progress(it, r / ref)
