@@ -37,6 +37,12 @@ class _FitBars:
         if "message" in event:
             _progress(event["message"])
             return
+        if "done" in event:             # frames finished on a Dask cluster
+            if "frames" not in self.bars:
+                self.close()
+                self.bars = {"frames": _bar("frames", total=event["total"], unit="frame")}
+            self.bars["frames"].update(event["done"] - self.bars["frames"].n)
+            return
         key = (event.get("frame", ""), event.get("kind", ""))
         if key not in self.bars:
             for bar in self.bars.values():
@@ -226,21 +232,12 @@ def cmd_fit_scan(args):
 
 def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False, workers=None, scheduler=None,
                 run=None):
-    """Fit a clip's frames (``pipeline.sequence``) with bars, a line per finished kind and
-    the report paths; on a Dask cluster with ``workers`` or ``scheduler``. run: more keys for
-    run.json (what the calibration was made from)."""
+    """Fit a clip's frames (``pipeline.sequence.fit_sequence``) with bars, a line per finished
+    kind and the report paths; on a Dask cluster with ``workers`` or ``scheduler``. run: more
+    keys for run.json (what the calibration was made from)."""
     from .pipeline import open_clip
-    from .pipeline.distributed import fit_sequence_distributed
-    from .pipeline.sequence import finish_run, fit_frames, run_hash, start_run, write_sequence_outputs
+    from .pipeline.sequence import curve_rows, fit_sequence, jitter, sequence_records
     clip = open_clip(clip)
-    if curves is not None and len(clip) > 1:
-        raise InvfaceError("--curves names one plate; in a sequence put FRAME.curves.json beside each frame "
-                           "(or let the detector track the curves)")
-    inputs = run_hash(model, cal, dict(options, curves=str(curves) if curves is not None else None))
-    resumed = start_run(out, clip.names if len(clip) > 1 else [], kinds, force, inputs, extra=run)
-    if resumed:
-        print(f"{out}: resuming the run there (same inputs); finished frames are skipped "
-              "(--restart starts over)", flush=True)
     bars = _FitBars()
     skipped = []
 
@@ -260,42 +257,23 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
         if frame.fits and len(clip) == 1:
             print(f"report: {folder / 'index.html'}")
     try:
-        if (workers or scheduler) and len(clip) > 1:
-            bar = _bar("frames", total=len(clip), unit="frame")
-
-            def progress(e):
-                if "message" in e:
-                    _progress(e["message"])
-                elif "done" in e:
-                    bar.update(e["done"] - bar.n)
-            try:
-                rows = fit_sequence_distributed(model, clip, cal, out, kinds, inputs=inputs, workers=workers or 1,
-                                                scheduler=scheduler, progress=progress, **options)
-            finally:
-                bar.close()
-            for r in rows:
-                for kind, k in r["kinds"].items():
-                    print(f"{r['name']} {kind}: curves {k['curve_rms_px']:.2f} px RMS"
-                          + (f"; flagged: {k['flagged']}" if k["flagged"] else ""))
-        else:
-            rows = fit_frames(model, clip, cal, out, kinds, curves=curves, inputs=inputs, progress=bars,
-                              on_kind=kind_done, on_frame=frame_done, **options)
+        rows = fit_sequence(model, clip, cal, out, kinds, curves=curves, progress=bars, on_kind=kind_done,
+                            on_frame=frame_done, force=force, keep=False, workers=workers, scheduler=scheduler,
+                            extra=run, **options)
     finally:
         bars.close()
-    finish_run(out)
-    if skipped:
-        print(f"{len(skipped)} frame(s) finished before from the same inputs were skipped: "
-              + ", ".join(skipped[:5]) + (" ..." if len(skipped) > 5 else ""))
+    distributed = (workers or scheduler) and len(clip) > 1
     for r in rows:
         if r.get("error"):
             print(f"warning: {r['name']}: not fitted: {r['error']}", flush=True)
+        elif distributed:          # the workers' fits print nothing here
+            for kind, k in r["kinds"].items():
+                print(f"{r['name']} {kind}: curves {k['curve_rms_px']:.2f} px RMS"
+                      + (f"; flagged: {k['flagged']}" if k["flagged"] else ""))
+    if skipped:
+        print(f"{len(skipped)} frame(s) finished before from the same inputs were skipped: "
+              + ", ".join(skipped[:5]) + (" ..." if len(skipped) > 5 else ""))
     if len(clip) > 1:
-        paths = write_sequence_outputs(out, kinds, fps=clip.fps)
-        print("animation curves: " + ", ".join(str(p) for p in paths[:2]))
-        if len(paths) > 3:
-            print("overlay video(s) (plate | render | wipe): " + ", ".join(str(p) for p in paths[2:-1]))
-        print(f"sequence report: {paths[-1]}")
-        from .pipeline.sequence import curve_rows, jitter, sequence_records
         for kind, recs in sequence_records(out, kinds).items():
             if len(recs) >= 3:
                 print(f"{kind}: frame-to-frame jitter {jitter(curve_rows(recs)):.3f} (RMS second difference in "
@@ -306,8 +284,7 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
             worst = max(rms)
             print(f"curve RMS over {len(rows)} frames: median {statistics.median(v[0] for v in rms):.2f} px; "
                   f"worst {worst[0]:.2f} px ({worst[1]}, {worst[2]})")
-    fitted = [r for r in rows if r["kinds"]]
-    if not fitted:      # exit non-zero only when no frame has any kind at all
+    if not any(r["kinds"] for r in rows):      # exit non-zero only when no frame has any kind at all
         first = rows[0] if rows else {}
         raise InvfaceError(first.get("error") or f"{first.get('name', clip.source)}: no model kind finished: "
                            + "; ".join(f"{k}: {why}" for k, why in first.get("failed", {}).items()))
@@ -323,6 +300,8 @@ def cmd_fit_plate(args):
         raise InvfaceError(f"--iterations {args.iterations}: give 0 or more shape-from-shading iterations")
     if args.workers is not None and args.workers < 1:
         raise InvfaceError(f"--workers {args.workers}: give 1 or more worker processes")
+    if args.temporal < 0:
+        raise InvfaceError(f"--temporal {args.temporal}: give 0 (off) or a positive weight")
     model = _load_model(args.model, args.resolution)
     clip = open_clip(args.plate, args.frames, args.camera)
     print(clip.describe(), flush=True)
@@ -357,8 +336,6 @@ def cmd_fit_plate(args):
             cal = _calibrate(model, frame.plate, saved, 30, curves=curves, source=source,
                              lam_curves=args.curve_lambda)          # its warnings go into the fit's notes
         run = {"calibrated_on": frame.digest, "calibration_frame": frame.name}
-    if args.temporal < 0:
-        raise InvfaceError(f"--temporal {args.temporal}: give 0 (off) or a positive weight")
     options = dict(iterations=args.iterations, shading=not args.no_shading, lam_curves=args.curve_lambda,
                    solver=args.solver, temporal=args.temporal)
     _fit_frames(model, clip, cal, kinds, out, options, curves=args.curves, force=args.restart,

@@ -239,7 +239,7 @@ def test_fit_plate_writes_the_kinds_that_finish_and_exits_0(small_expressive_mod
     assert len(err) == 1 and "no model kind finished: blendshape: Newton did NOT converge" in err[0], err
 
 
-def test_report_names_a_truncated_fit_file_and_negative_iterations_are_refused(tmp_path):
+def test_report_names_a_truncated_fit_file_and_bad_numbers_are_refused(tmp_path, capsys):
     (tmp_path / "fit.json").write_text('{"kind": "blendshape"}')
     (tmp_path / "fit.npz").write_bytes(b"PK\x03\x04" + b"\x00" * 40)         # a zip cut short
     r = run("report", str(tmp_path))
@@ -247,6 +247,10 @@ def test_report_names_a_truncated_fit_file_and_negative_iterations_are_refused(t
     assert str(tmp_path) in r.stderr and "truncated or corrupt" in r.stderr, r.stderr
     r = run("fit-plate", str(tmp_path / "fit.json"), "--iterations", "-1")
     assert r.returncode == 2 and "--iterations -1" in r.stderr and "Traceback" not in r.stderr
+    from invface.cli import main
+    for option, value in (("--workers", "0"), ("--temporal", "-1")):      # refused before any work
+        assert main(["fit-plate", str(tmp_path / "fit.json"), option, value]) == 2
+        assert f"{option} {value}" in capsys.readouterr().err
 
 
 def test_implausible_plate_inputs_are_refused_or_flagged(small_expressive_model, tmp_path, monkeypatch, capsys):

@@ -16,14 +16,13 @@ polled once a second, as one count over all frames.
 """
 from __future__ import annotations
 
-import json
 import logging
 import time
 from pathlib import Path
 
 from ..errors import InvfaceError
 from .plates import _say, model_kinds
-from .sequence import fit_frames, start_from
+from .sequence import fit_frames, fit_record, start_from
 
 RETRIES = 2
 
@@ -44,16 +43,8 @@ def _fit_chunk(model, clip, calibration, out, kinds, start, stop, starts, inputs
 
 def _finished_frames(out, names, kinds, inputs):
     """How many of the frames have every kind's fit.json from this run's inputs."""
-    done = 0
-    for name in names:
-        ok = True
-        for k in kinds:
-            try:
-                ok &= json.loads((Path(out) / name / k / "fit.json").read_text()).get("run_inputs") == inputs
-            except (OSError, ValueError):
-                ok = False
-        done += ok
-    return done
+    return sum(all((fit_record(Path(out) / name, k) or {}).get("run_inputs") == inputs for k in kinds)
+               for name in names)
 
 
 def _client(workers, scheduler):
@@ -103,7 +94,7 @@ def fit_sequence_distributed(model, clip, calibration, out, kinds=("blendshape",
         for (a, b), (_, pb) in zip(bounds[1:], bounds[:-1]):
             starts = {}
             for k in kinds:
-                rec = _record(out, names[pb - 1], k)
+                rec = fit_record(Path(out) / names[pb - 1], k)
                 if rec is not None and not rec.get("flagged"):
                     starts[k] = start_from(model, rec)
             if starts:
@@ -135,10 +126,3 @@ def _gather(client, futs, bounds):
         except Exception as e:                   # a worker lost more than RETRIES times, ...
             raise InvfaceError(f"frames {a}-{b - 1}: the Dask task failed: {type(e).__name__}: {e}") from None
     return out
-
-
-def _record(out, name, kind):
-    try:
-        return json.loads((Path(out) / name / kind / "fit.json").read_text())
-    except (OSError, ValueError):
-        return None

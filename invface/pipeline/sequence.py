@@ -106,14 +106,19 @@ def frame_hash(digest, inputs):
     return _sha(digest, inputs)
 
 
+def fit_record(folder, kind):
+    """The kind's fit.json in a frame folder as a dict (None when absent or unreadable)."""
+    try:
+        return json.loads((Path(folder) / kind / "fit.json").read_text())
+    except (OSError, ValueError):
+        return None
+
+
 def finished_record(folder, kind, input_hash):
     """The kind's fit.json in a frame folder (a dict) when it was made from the same inputs,
     else None."""
-    try:
-        rec = json.loads((Path(folder) / kind / "fit.json").read_text())
-    except (OSError, ValueError):
-        return None
-    return rec if rec.get("input_hash") == input_hash else None
+    rec = fit_record(folder, kind)
+    return rec if rec is not None and rec.get("input_hash") == input_hash else None
 
 
 def start_from(model, record):
@@ -221,7 +226,7 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
 
 def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), curves=None, progress=None,
                  on_kind=None, on_frame=None, force=False, camera=None, select=None, keep=True, workers=None,
-                 scheduler=None, **options):
+                 scheduler=None, extra=None, **options):
     """Fit a plate sequence in order (``fit_frames``). frames: a Clip, a
     video, folder or image path (``open_clip``, with ``select`` "START:STOP[:STEP]" and
     ``camera``), or a list of plate paths; curves: for a single plate only (a sequence takes
@@ -229,9 +234,12 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
     see ``fit_frames``; an out folder with an earlier run's fits is resumed when they were
     made from the same inputs, refused otherwise unless ``force`` (``start_run``); then the
     sequence outputs (``write_sequence_outputs``); ``workers`` or ``scheduler``: on a Dask
-    cluster (``distributed.fit_sequence_distributed``; needs ``out``). Returns the per-frame
-    summaries of ``fit_frames``, each with its FrameFit as "fit" when fitted on this process
-    and ``keep`` (a long clip's fits are on disk: their renders would fill the memory)."""
+    cluster (``distributed.fit_sequence_distributed``; needs ``out``); ``extra``: more keys for
+    run.json. progress receives the fits' events, {"message": ...} for each step (a resumed
+    run, the sequence files written) and, on a cluster, {"done": frames, "total": frames}.
+    Returns the per-frame summaries of ``fit_frames``, each with its FrameFit as "fit" when
+    fitted on this process and ``keep`` (a long clip's fits are on disk: their renders would
+    fill the memory)."""
     clip = _clip(frames, select, camera)
     if curves is not None and len(clip) > 1:
         raise InvfaceError("one curves file names one plate; in a sequence put FRAME.curves.json beside each "
@@ -239,8 +247,8 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
     kinds = model_kinds(kinds)
     options.setdefault("temporal", TEMPORAL_LAMBDA)
     inputs = run_hash(model, calibration, dict(options, curves=str(curves) if curves is not None else None))
-    if out is not None:
-        start_run(out, clip.names if len(clip) > 1 else [], kinds, force, inputs)
+    if out is not None and start_run(out, clip.names if len(clip) > 1 else [], kinds, force, inputs, extra):
+        _say(progress, message=f"{out}: resuming the run there (same inputs): its finished frames are skipped")
     if (workers or scheduler) and len(clip) > 1:
         from .distributed import fit_sequence_distributed
         rows = fit_sequence_distributed(model, clip, calibration, out, kinds, inputs=inputs, workers=workers or 1,
@@ -251,7 +259,12 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
     if out is not None:
         finish_run(out)
         if len(clip) > 1:
-            write_sequence_outputs(out, kinds, fps=clip.fps)
+            paths = write_sequence_outputs(out, kinds, fps=clip.fps)
+            _say(progress, message="animation curves: " + ", ".join(str(p) for p in paths[:2]))
+            if len(paths) > 3:
+                _say(progress, message="overlay video(s) (plate | render | wipe): "
+                                       + ", ".join(str(p) for p in paths[2:-1]))
+            _say(progress, message=f"sequence report: {paths[-1]}")
     return rows
 
 
