@@ -17,6 +17,7 @@ polled once a second, as one count over all frames.
 from __future__ import annotations
 
 import logging
+import os
 import time
 from pathlib import Path
 
@@ -35,8 +36,23 @@ def chunk_bounds(n, chunks):
     return [(a, b) for a, b in zip(edges[:-1], edges[1:])]
 
 
-def _fit_chunk(model, clip, calibration, out, kinds, start, stop, starts, inputs, skip, record, options):
-    """One task: ``fit_frames`` over positions [start, stop) (runs on a worker)."""
+def _pin_threads(n):
+    """Cap this process's compute threads at n (None: leave them): Dr.Jit's LLVM pool and
+    Numba's (BLAS is capped by Dask's nanny already). Without it each local worker starts a
+    pool as wide as the machine and the workers' pools fight over the cores."""
+    if not n:
+        return
+    import drjit as dr
+    import numba
+    dr.set_thread_count(n)
+    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+
+
+def _fit_chunk(model, clip, calibration, out, kinds, start, stop, starts, inputs, skip, record, options,
+               threads=None):
+    """One task: ``fit_frames`` over positions [start, stop) (runs on a worker with at most
+    ``threads`` compute threads)."""
+    _pin_threads(threads)
     return fit_frames(model, clip, calibration, out, kinds, start=start, stop=stop, starts=starts, inputs=inputs,
                       skip=skip, record=record, **options)
 
@@ -76,8 +92,9 @@ def fit_sequence_distributed(model, clip, calibration, out, kinds=("blendshape",
         _say(progress, message=f"{len(clip)} frames in {len(bounds)} chunks on {n} Dask workers "
                                f"({scheduler or 'local cluster'})")
         m, c = client.scatter([model, calibration], broadcast=True)
+        threads = None if scheduler else max(1, (os.cpu_count() or 1) // n)    # a local cluster shares this machine
         job = f"invface-{inputs}-{time.time_ns()}"
-        futs = [client.submit(_fit_chunk, m, clip, c, out, kinds, a, b, None, inputs, True, {}, options,
+        futs = [client.submit(_fit_chunk, m, clip, c, out, kinds, a, b, None, inputs, True, {}, options, threads,
                               key=f"{job}-chunk-{a}", retries=RETRIES, pure=False) for a, b in bounds]
         names = clip.names
         while True:
@@ -99,7 +116,7 @@ def fit_sequence_distributed(model, clip, calibration, out, kinds=("blendshape",
                     starts[k] = start_from(model, rec)
             if starts:
                 second.append(client.submit(_fit_chunk, m, clip, c, out, kinds, a, min(a + overlap, b), starts,
-                                            inputs, False, {"second_pass": True}, options,
+                                            inputs, False, {"second_pass": True}, options, threads,
                                             key=f"{job}-boundary-{a}", retries=RETRIES, pure=False))
         if second:
             _say(progress, message=f"second pass: {len(second)} chunk boundaries, {overlap} frame(s) each, "
