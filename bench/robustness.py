@@ -1,7 +1,7 @@
 """Does the simulation answer everywhere in the fitting box? (issue 25)
 
     python bench/robustness.py [--model default|ict|FILE.npz] [--count 256] [--singles] [--pairs]
-                               [--resolution 1.0] [--results FILE.jsonl]
+                               [--resolution 1.0] [--results FILE.jsonl] [--only TEXT]
 
 Cold solves (each from rest, as a freshly loaded model) of the driven simulation at:
   * ``--count`` quasi-random control vectors (scrambled Sobol) over the box the fits use:
@@ -17,7 +17,9 @@ every failure or load-stepped solve.
 
 ``--results FILE.jsonl`` appends one line per case as it finishes and skips the cases already
 there, so a sweep of several hours can be stopped and resumed (the tallies cover every case in
-the file). ``--model ict`` builds an actor from ../shared/data/ict-facekit's neutral with its imported
+the file). ``--only TEXT`` runs the cases whose label contains TEXT and prints each one
+(``--only "sample 187"``; ``--pairs --only jaw_rx``: the lip shapes against the open jaw).
+``--model ict`` builds an actor from ../shared/data/ict-facekit's neutral with its imported
 blendshapes (``build-model --blendshapes``).
 """
 from __future__ import annotations
@@ -97,6 +99,7 @@ def main():
     ap.add_argument("--singles", action="store_true")
     ap.add_argument("--pairs", action="store_true")
     ap.add_argument("--results", help="JSON-lines file: append each case, skip the cases already in it")
+    ap.add_argument("--only", help="run only the cases whose label contains this text, printing each")
     a = ap.parse_args()
     t0 = time.perf_counter()
     model = load(a.model, a.resolution)
@@ -109,6 +112,8 @@ def main():
             r = json.loads(line)
             done[r[0], r[1]] = tuple(r)
     for group, label, p in cases(model, a.count, a.singles, a.pairs):
+        if a.only is not None and a.only not in label:
+            continue
         if (group, label) in done:
             rows.append(done[group, label])
             continue
@@ -126,8 +131,8 @@ def main():
         if a.results:
             with open(a.results, "a") as f:
                 f.write(json.dumps(rows[-1]) + "\n")
-        if not r.converged or r.load_steps:
-            print(f"  {group} {label}: {r.report()}", flush=True)
+        if not r.converged or r.load_steps or a.only is not None:
+            print(f"  {group} {label}: {r.report()}; deepest penetration {depth * 1e3:.2f} mm", flush=True)
         if len(rows) % 32 == 0:
             print(f"  [{len(rows)} done, {time.perf_counter() - t0:.0f} s]", end=" ")
             summary(rows, ["all"])

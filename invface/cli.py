@@ -294,7 +294,8 @@ def cmd_fit_plate(args):
     """Fit controls and pose to a plate, or to each frame of a video or a folder (a sequence)."""
     from .fit.calibrate import Calibration
     from .pipeline import find_curves, model_kinds, open_clip
-    from .pipeline.sequence import pick_neutral, read_run
+    from .model.facemodel import FaceModel
+    from .pipeline.sequence import actor_identity, pick_neutral, read_run
     from .report.runs import earlier_fits
     if args.iterations < 0:
         raise InvfaceError(f"--iterations {args.iterations}: give 0 or more shape-from-shading iterations")
@@ -308,9 +309,9 @@ def cmd_fit_plate(args):
     kinds = model_kinds(args.model_kind)
     out = Path(args.output) if args.output else Path("reports") / "fit-plate" / Path(args.plate).stem
     run = {}
-    if args.calib:
-        cal = Calibration.load(args.calib, vertex_count=len(model.neutral))
-    else:
+    identity = len(clip) > 1 and not args.no_identity
+    frame = pose = None
+    if not args.calib or identity:
         if args.neutral_frame is not None:
             if args.neutral_frame not in clip.indices:
                 raise InvfaceError(f"--neutral-frame {args.neutral_frame}: not among the selected frames "
@@ -323,19 +324,37 @@ def cmd_fit_plate(args):
             curves, source = find_curves(model, frame.plate, args.curves)
         else:
             print("picking the most neutral-looking frame to calibrate on", flush=True)
-            frame, curves, source, _ = pick_neutral(model, clip, lam=args.curve_lambda, progress=_events)
+            frame, curves, source, pose = pick_neutral(model, clip, lam=args.curve_lambda, progress=_events)
+    before = {} if args.restart else read_run(out)
+    mine = {"identity_from": frame.digest if identity else None}
+    if not args.calib:
+        mine["calibrated_on"] = frame.digest
+    if earlier_fits(out) and any(before.get(k) != v for k, v in mine.items()) and not args.restart:
+        raise InvfaceError(f"{out}: holds an earlier run's fits; pass --restart to replace them, or "
+                           "choose another output folder")           # refused before any work is done
+    if identity:
+        actor = out / "actor.npz"
+        if actor.is_file() and before.get("identity_from") == frame.digest:
+            print(f"reusing {actor}: the actor's identity from {frame.name}, made by the run being resumed", flush=True)
+        else:
+            print(f"the actor's identity from the curves of {frame.name}", flush=True)
+            adapted, _ = actor_identity(model, frame, curves, lam=args.curve_lambda, pose=pose, progress=_events)
+            out.mkdir(parents=True, exist_ok=True)
+            (adapted if adapted is not model else model).save(actor)
+        model = FaceModel.load(actor)      # as a resumed run reads it: the same bytes, the same run hash
+        run["identity_from"] = frame.digest
+    if args.calib:
+        cal = Calibration.load(args.calib, vertex_count=len(model.neutral))
+    else:
         saved = out / "calib.npz"
-        if not args.restart and saved.is_file() and read_run(out).get("calibrated_on") == frame.digest:
+        if saved.is_file() and all(before.get(k) == v for k, v in mine.items()):
             print(f"reusing {saved}: calibrated on {frame.name} by the run being resumed", flush=True)
             cal = Calibration.load(saved, vertex_count=len(model.neutral))
         else:
-            if earlier_fits(out) and not args.restart:      # refused before any work is done
-                raise InvfaceError(f"{out}: holds an earlier run's fits; pass --restart to replace them, or "
-                                   "choose another output folder")
             print(f"no --calib: calibrating light and albedo on {frame.name} (Eq. 14)", flush=True)
             cal = _calibrate(model, frame.plate, saved, 30, curves=curves, source=source,
                              lam_curves=args.curve_lambda)          # its warnings go into the fit's notes
-        run = {"calibrated_on": frame.digest, "calibration_frame": frame.name}
+        run.update(calibrated_on=frame.digest, calibration_frame=frame.name)
     options = dict(iterations=args.iterations, shading=not args.no_shading, lam_curves=args.curve_lambda,
                    solver=args.solver, temporal=args.temporal)
     _fit_frames(model, clip, cal, kinds, out, options, curves=args.curves, force=args.restart,
@@ -487,6 +506,9 @@ def build_parser():
                     help="shape-from-shading solver: the paper's dogleg (Gauss-Newton on forward-mode "
                          "image Jacobians) or L-BFGS-B on adjoint gradients (for many controls)")
     fp.add_argument("--no-shading", action="store_true", help="curves only (Eq. 15)")
+    fp.add_argument("--no-identity", action="store_true",
+                    help="sequences: fit with the model as it is (default: its neutral first adapted to the "
+                         "actor from the calibration frame's curves, written to DIR/actor.npz)")
     fp.add_argument("--restart", "--force", dest="restart", action="store_true",
                     help="start over: replace an earlier run's fits in the output folder (a rerun with the same "
                          "inputs otherwise resumes it, skipping the frames already fitted)")

@@ -64,6 +64,57 @@ def _transfer(values, surf, Fg, solver):
     return out
 
 
+def carry_anatomy(template, positions, progress=None):
+    """The template's flesh, bones, muscles and jaw carried to new skin positions (V,3) m by
+    the volume morph (paper 001 sec. 7): (FaceModel without blendshapes, VolumeMorph). The
+    skin is embedded by moving least squares. Raises MeshError when the flesh cannot follow."""
+    say = progress or (lambda m: None)
+    say("volume morph: flesh, bones, muscles")
+    q0 = template.meta.get("quality") or quality_summary(template.rest_positions, template.tets)
+    vm = morph_volume(template, positions - template.neutral, min_radius_ratio=min(0.005, q0["min_radius_ratio"]),
+                      progress=say)
+    X0, X1, tets = template.rest_positions, vm.X, template.tets
+    muscles = [replace(m, fibers=carry_fibers(X0, X1, tets, m.tets, m.fibers),
+                       centerline=carry_points(X0, X1, tets, m.centerline)) for m in template.muscles]
+    cranium = (carry_points(X0, X1, tets, template.cranium_mesh[0]), template.cranium_mesh[1])
+    jaw = (carry_points(X0, X1, tets, template.jaw_mesh[0]), template.jaw_mesh[1])
+    pivot = carry_points(X0, X1, tets, template.jaw_pivot)[0]
+    et, ew = locate_near(X1, tets, positions, template.embed_tets)   # each skin vertex stays on its side of the lips
+    model = FaceModel(
+        neutral=positions, triangles=template.triangles, blendshape_names=[],
+        blendshapes=np.zeros((0, len(positions), 3)), jaw_pivot=pivot, jaw_frame=template.jaw_frame.copy(),
+        jaw_weights=template.jaw_weights.copy(), rest_positions=X1, tets=tets,
+        fixed_cranium=template.fixed_cranium, fixed_jaw=template.fixed_jaw,
+        embed_tets=et, embed_weights=ew, volume_jaw_weights=template.volume_jaw_weights,
+        muscles=muscles, landmarks=dict(template.landmarks), curves=dict(template.curves),
+        cranium_mesh=cranium, jaw_mesh=jaw, meta={"skin_embedding": dict(MLS)},   # smooth across the tets' faces
+    )
+    W = model.embedding_matrix()
+    say(f"skin embedded: moving least squares over {W.nnz / W.shape[0]:.1f} tet vertices per skin vertex")
+    return model, vm
+
+
+def adapt_identity(model, displacement, progress=None):
+    """``model`` with its neutral moved by ``displacement`` (V,3) m, an identity correction
+    (``fit.identity``): the anatomy carried along (``carry_anatomy``); the blendshapes, the
+    activations that made them, the muscles' activation curves, the jaw split and the scan
+    transform kept; the muscle-track precompute (paper 000 Eq. 10-11) redone on the new rest
+    state. Returns the new FaceModel."""
+    from ..sim.poisson import track_displacements
+    new, _ = carry_anatomy(model, model.neutral + np.asarray(displacement, float), progress)
+    new.blendshape_names = list(model.blendshape_names)
+    new.blendshapes = np.array(model.blendshapes, copy=True)
+    new.blendshape_activations = model.blendshape_activations
+    new.scan_transform = model.scan_transform
+    new.meta = {**model.meta, "skin_embedding": dict(MLS),
+                "quality": quality_summary(new.rest_positions, new.tets),
+                "identity": {"max_mm": float(np.linalg.norm(displacement, axis=1).max() * 1e3)}}
+    if len(new.blendshape_names):
+        (progress or (lambda m: None))("muscle-track precompute (paper 000 Eq. 10-11)")
+        new.track_displacements = track_displacements(new)
+    return new
+
+
 def build_model(neutral, blendshapes=None, template=None, unit=None, expressions="copy",
                 progress=None):
     """Morph the template onto an actor's neutral scan. Returns (FaceModel, MorphResult).
@@ -147,30 +198,8 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
                          progress=say)
     lap("surface")
 
-    say("volume morph: flesh, bones, muscles")
-    q0 = template.meta.get("quality") or quality_summary(template.rest_positions, template.tets)
-    d = surf.positions - template.neutral
-    vm = morph_volume(template, d, min_radius_ratio=min(0.005, q0["min_radius_ratio"]), progress=say)
-    X0, X1, tets = template.rest_positions, vm.X, template.tets
-    muscles = [replace(m, fibers=carry_fibers(X0, X1, tets, m.tets, m.fibers),
-                       centerline=carry_points(X0, X1, tets, m.centerline)) for m in template.muscles]
-    cranium = (carry_points(X0, X1, tets, template.cranium_mesh[0]), template.cranium_mesh[1])
-    jaw = (carry_points(X0, X1, tets, template.jaw_mesh[0]), template.jaw_mesh[1])
-    pivot = carry_points(X0, X1, tets, template.jaw_pivot)[0]
-    et, ew = locate_near(X1, tets, surf.positions, template.embed_tets)   # each skin vertex stays on its side of the lips
+    model, vm = carry_anatomy(template, surf.positions, progress=say)
     lap("volume")
-
-    model = FaceModel(
-        neutral=surf.positions, triangles=template.triangles, blendshape_names=[],
-        blendshapes=np.zeros((0, len(surf.positions), 3)), jaw_pivot=pivot, jaw_frame=template.jaw_frame.copy(),
-        jaw_weights=template.jaw_weights.copy(), rest_positions=X1, tets=tets,
-        fixed_cranium=template.fixed_cranium, fixed_jaw=template.fixed_jaw,
-        embed_tets=et, embed_weights=ew, volume_jaw_weights=template.volume_jaw_weights,
-        muscles=muscles, landmarks=dict(template.landmarks), curves=dict(template.curves),
-        cranium_mesh=cranium, jaw_mesh=jaw, meta={"skin_embedding": dict(MLS)},   # smooth across the tets' faces
-    )
-    W = model.embedding_matrix()
-    say(f"skin embedded: moving least squares over {W.nnz / W.shape[0]:.1f} tet vertices per skin vertex")
     S = np.diag([target.scale] * 3 + [1.0])
     A = np.eye(4)
     A[:3, :3], A[:3, 3] = al.R, al.t
@@ -209,7 +238,7 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     tri, bw, _ = closest_points(np.array([TL[k] for k in TL]), template.neutral, template.triangles)
     on_model = dict(zip(TL, barycentric_points(model.neutral, template.triangles, tri, bw)))
     dist = closest_points(model.neutral[surf.snapped], Va, Fg)[2]
-    q = quality_summary(X1, tets)
+    q = quality_summary(model.rest_positions, model.tets)
     stats = {
         "unit": target.unit, "scale": target.scale, "cleaning": target.notes,
         "symmetry_error_mm": al.frame.symmetry_error * 1000,
@@ -219,7 +248,8 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
         "off_scan_landmarks": list(off_scan), "openings_mapped": opened, "ear_boxes": len(ears), "snapped_fraction": float(surf.snapped.mean()), "inverted_triangles": surf.inverted,
         "triangle_relax_rounds": surf.relax_rounds, "tet_relaxed_vertices": vm.relaxed_vertices, "inner_pushed": vm.pushed,
         "tet_relax_rounds": vm.relax_rounds, "quality": q,
-        "centerlines_inside": inside_fraction(X1, tets, np.concatenate([m.centerline for m in muscles])),
+        "centerlines_inside": inside_fraction(model.rest_positions, model.tets,
+                                             np.concatenate([m.centerline for m in model.muscles])),
         "blendshapes": {n: kinds.get(n) for n in model.blendshape_names} if blendshapes is not None else expressions,
         "jaw_split": jaw_split,
     }

@@ -440,3 +440,23 @@ def pick_neutral(model, clip, candidates=8, lam=None, progress=None):
         raise InvfaceError(f"{clip.source}: no face found in the {len(positions)} frames tried for the calibration; "
                            "pass --calib or --neutral-frame")
     return best[1:]
+
+
+def actor_identity(model, frame, curves, lam=None, pose=None, progress=None):
+    """The model adapted to the actor of a shot from one neutral-looking frame's curves
+    {name: (n,2) px}: the controls and pose of Eq. 15 (``pose``, a PoseEstimate, or fitted
+    here), then a smooth neutral correction (``fit.identity.fit_identity``) carried into the
+    anatomy (``morph.build.adapt_identity``). Returns (FaceModel, IdentityFit); the model is
+    ``model`` itself when the correction is larger than ``IDENTITY_MAX_MM`` (not an identity:
+    a wrong frame or wrong curves), with a message saying so."""
+    from ..fit.identity import IDENTITY_MAX_MM, fit_identity
+    from ..morph.build import adapt_identity
+    from .plates import pose_from_curves
+    pose = pose or pose_from_curves(model, frame.plate, curves, lam)
+    fit = fit_identity(model, frame.plate.camera, curves, pose.p, pose.rotation, pose.translation)
+    if fit.max_mm > IDENTITY_MAX_MM:
+        _say(progress, message=f"{frame.name}: {fit.describe()}: more than {IDENTITY_MAX_MM:g} mm is no identity "
+                               "correction; the model is used as it is")
+        return model, fit
+    _say(progress, message=f"{frame.name}: {fit.describe()}")
+    return adapt_identity(model, fit.displacement, progress=lambda m: _say(progress, message=m)), fit
