@@ -326,17 +326,18 @@ class FrameFit:
         self.written[str(Path(folder)), kind] = len(self.failed)
         return path
 
-    def save(self, folder):
+    def save(self, folder, quick=False):
         """Write every kind's files (those not written there yet, or written before another
-        kind failed: their notes name it) and the report; returns the report page's path. An
-        InvfaceError naming the reasons when no kind finished."""
+        kind failed: their notes name it) and the report (``quick``: a sequence frame's page,
+        ``report.fit.write_report``); returns the report page's path. An InvfaceError naming
+        the reasons when no kind finished."""
         from ..report.fit import write_report
         if not self.fits:
             raise InvfaceError(self.failure())
         for kind in self.fits:
             if self.written.get((str(Path(folder)), kind)) != len(self.failed):
                 self.save_kind(folder, kind)
-        return write_report(folder, title=self.title or f"invface plate fit: {self.name}")
+        return write_report(folder, title=self.title or f"invface plate fit: {self.name}", quick=quick)
 
 
 def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), starts=None, iterations=25,

@@ -152,7 +152,8 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
     finished from the same inputs are read, not fitted; ``record``: more keys for fit.json;
     ``keep``: each summary's "fit" holds the frame's FrameFit (None when skipped).
     A frame of a longer clip that cannot be fitted at all (no face found, no kind finished)
-    is reported in its summary's "error" and the run goes on. ``fit_frame`` options
+    is reported in its summary's "error" and the run goes on. A sequence frame's page has the
+    plate, render and curve pictures only (``invface report`` on its folder adds the rest). ``fit_frame`` options
     (iterations, shading, lam_curves, solver, title, notes). Returns one summary dict per
     frame: {name, index, time, skipped, kinds: {kind: {curve_rms_px, flagged}}, failed, error}."""
     from ..fit.landmarks import LandmarkTracker
@@ -208,7 +209,7 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
                 rows.append(row)
                 continue
             if folder is not None and ff.fits:
-                ff.save(folder)
+                ff.save(folder, quick=not single)
             for k, fit in ff.fits.items():
                 why = ff.record[k]["flagged"]
                 row["kinds"][k] = {"curve_rms_px": fit.curve_rms_px, "flagged": why}

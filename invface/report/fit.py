@@ -139,8 +139,10 @@ def _face_crop(data, shape, margin=0.25):
     return slice(lo[1], hi[1]), slice(lo[0], hi[0])
 
 
-def _fit_images(folder):
-    """Pictures of one fit folder; returns (summary dict, {caption: file})."""
+def _fit_images(folder, quick=False):
+    """Pictures of one fit folder; returns (summary dict, {caption: file}). quick: the plate,
+    render, wipe, error and curve pictures only (no 3D heat map or charts, 60 % of a curves-only
+    frame's time in a sequence)."""
     folder = Path(folder)
     summary = json.loads((folder / "fit.json").read_text())
     pics = {}
@@ -167,6 +169,8 @@ def _fit_images(folder):
         pics[f"per-pixel error (linear, black 0, white {scale:.3f}{where})"] = _png(folder / "error.png",
                                                                                   _heat(err, scale))
         pics["curves: plate (green), model (red)"] = _curves_overlay(folder / "curves.png", plate, data)
+    if quick:
+        return summary, pics
     pics["3D heat map"] = _mesh_heat(folder / "mesh_error.png", data, summary)
     pics["blendshape weights"] = _bars(folder / "weights.png", summary["weights"], "blendshape weights", "weight")
     if summary.get("activations"):
@@ -199,8 +203,10 @@ def _seconds(sec):
     return f"{sec['total']:.1f} ({stages})" if "total" in sec else stages
 
 
-def write_report(run, title=None):
-    """Write ``run/index.html`` for the fit(s) in ``run``. Returns its path."""
+def write_report(run, title=None, quick=False):
+    """Write ``run/index.html`` for the fit(s) in ``run``. Returns its path. quick: the
+    pictures of ``_fit_images(quick=True)`` (a sequence's frame pages; ``invface report``
+    on the frame's folder adds the rest)."""
     run = Path(run)
     folders = [run] if (run / "fit.json").is_file() else sorted(p.parent for p in run.glob("*/fit.json"))
     if not folders:
@@ -208,7 +214,7 @@ def write_report(run, title=None):
     sections, rows = [], []
     for f in folders:
         try:
-            summary, pics = _fit_images(f)
+            summary, pics = _fit_images(f, quick)
         except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError) as e:
             raise InvfaceError(f"{f}: unreadable fit result, fit.json or fit.npz truncated or corrupt "
                                f"({type(e).__name__}: {e}); fit again") from None
@@ -218,10 +224,12 @@ def write_report(run, title=None):
                        "</figcaption></figure>" for c, p in pics.items())
         notes = "".join(f"<p class=note>{html.escape(n)}</p>" for n in summary.get("notes", []))
         heat = summary.get("mesh_heat", {})
+        status = f"status: {html.escape(str(summary.get('status', '')))}; " + (
+            f"3D heat map: {html.escape(heat.get('label', ''))}, scale 0-{heat.get('scale_mm', 0):.2f} mm, "
+            f"median {heat.get('median_mm', 0):.3f} mm" if not quick else
+            f"the 3D heat map and the charts: <code>invface report {html.escape(str(run))}</code>")
         sections.append(
-            f"<h2>{html.escape(summary['kind'])} model</h2>{notes}"
-            f"<p>status: {html.escape(str(summary.get('status', '')))}; 3D heat map: {html.escape(heat.get('label', ''))}, "
-            f"scale 0-{heat.get('scale_mm', 0):.2f} mm, median {heat.get('median_mm', 0):.3f} mm</p>"
+            f"<h2>{html.escape(summary['kind'])} model</h2>{notes}<p>{status}</p>"
             f"<div class=grid>{figs}</div>"
             f"<details><summary>all parameters (JSON)</summary><pre>{html.escape(json.dumps({k: v for k, v in summary.items() if k != 'history'}, indent=1))}</pre></details>")
     head = "".join(f"<th>{html.escape(n)}</th>" for n, _ in COMPARE)
