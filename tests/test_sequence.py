@@ -101,6 +101,13 @@ def test_video_fit_is_killed_and_resumed_and_writes_curves_and_overlay(clip, tmp
     assert all((out / n / "blendshape/fit.json").stat().st_mtime_ns == t for n, t in stamps.items())
     assert len(list(out.glob("*/blendshape/fit.json"))) == N_FRAMES
     assert "resuming the run there" in r.stdout and "jitter" in r.stdout
+    # the actor's identity was fitted once, on the picked frame, and reused by the resumed run
+    assert (out / "actor.npz").is_file() and "reusing" in r.stdout and "identity" in r.stdout
+    # a frame's page: the quick pictures; `invface report` on the frame adds the heat map
+    frame = out / "clip.frame_000003"
+    assert (frame / "blendshape/curves.png").is_file() and not (frame / "blendshape/mesh_error.png").exists()
+    rep = subprocess.run([sys.executable, "-m", "invface.cli", "report", str(frame)], capture_output=True, text=True)
+    assert rep.returncode == 0 and (frame / "blendshape/mesh_error.png").is_file(), rep.stderr
     # other inputs: refused, then --restart starts over
     r = subprocess.run(cli(root, str(video), "-o", str(out), "--temporal", "0"), capture_output=True, text=True)
     assert r.returncode == 2 and "made from other inputs" in r.stderr and "--restart" in r.stderr
