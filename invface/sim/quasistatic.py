@@ -228,13 +228,16 @@ class Simulator:
         """Steady state for muscle activations (dict or (M,)), jaw parameters (6,), optional
         Tracks (Eq. 5), warm start from a previous SimResult. Returns a SimResult.
 
-        Converged when the free-DOF residual |f| <= rtol * max(|f_0|, force scale), where f_0
-        is the residual at the start (force scale: shear modulus x edge length^2 per DOF).
+        Converged when the free-DOF residual |f| <= rtol * force scale * sqrt(DOFs) (force
+        scale: shear modulus x edge length^2 per DOF), wherever the solve started: measured
+        against the start's residual, a cold solve that began at 3.9e6 N counted 21 N as
+        5.5e-6 (bench/RESULTS.md, issue 25).
 
         Newton goes straight to the target from the warm state (or the jaw-skinned rest
         state). If that fails, the solve follows the straight path from the start's inputs
         (the warm result's, or rest) to the target's in load steps: each step is Newton-solved
-        from the previous step's state, a failed step is halved and a good one doubles the
+        from the previous step's state moved by the Euler predictor (``_tangent_start``) or by
+        the jaw skinning, whichever is lower in energy; a failed step is halved and a good one doubles the
         next, down to 1/``MIN_STEP`` of the path. The energy is a function of the state and
         the inputs alone, so the equilibrium reached does not depend on the path taken
         (up to the Newton tolerance) as long as it is the same local minimum.
