@@ -340,7 +340,7 @@ def cmd_fit_plate(args):
             print(f"the actor's identity from the curves of {frame.name}", flush=True)
             adapted, _ = actor_identity(model, frame, curves, lam=args.curve_lambda, pose=pose, progress=_events)
             out.mkdir(parents=True, exist_ok=True)
-            (adapted if adapted is not model else model).save(actor)
+            adapted.save(actor)
         model = FaceModel.load(actor)      # as a resumed run reads it: the same bytes, the same run hash
         run["identity_from"] = frame.digest
     if args.calib:

@@ -87,22 +87,20 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
             blocks.append((vid, a))
         return np.concatenate(rows), g, blocks
 
-    r0, _, _ = data(d)
+    r0, g, blocks = data(d)
+    r = r0
     for _ in range(iterations):
-        r, g, blocks = data(d)
-        ii, jj, vv = [], [], []
-        for vid, a in blocks:
-            for s in range(3):
-                for t in range(3):
-                    ii.append(3 * vid + s)
-                    jj.append(3 * vid + t)
-                    vv.append(a[:, s] * a[:, t])
-        H = reg + sp.coo_matrix((np.concatenate(vv), (np.concatenate(ii), np.concatenate(jj))),
+        vid = np.concatenate([v for v, _ in blocks])
+        a = np.concatenate([a for _, a in blocks])                          # (n, 3)
+        rows = 3 * vid[:, None, None] + np.arange(3)[None, :, None]          # (n, 3, 1)
+        cols = 3 * vid[:, None, None] + np.arange(3)[None, None, :]          # (n, 1, 3)
+        rows, cols = np.broadcast_arrays(rows, cols)
+        H = reg + sp.coo_matrix((np.einsum("ns,nt->nst", a, a).ravel(), (rows.ravel(), cols.ravel())),
                                 shape=(3 * V, 3 * V)).tocsr()
         step = spsolve(H.tocsc(), -(reg @ d.ravel() + g.ravel())).reshape(V, 3)
         d = d + step
+        r, g, blocks = data(d)
         if np.abs(step).max() < 1e-6:
             break
-    r1, _, _ = data(d)
     rms = lambda r: rms_px({"all": r})         # noqa: E731
-    return IdentityFit(d, rms(r0), rms(r1), float(np.linalg.norm(d, axis=1).max() * 1e3))
+    return IdentityFit(d, rms(r0), rms(r), float(np.linalg.norm(d, axis=1).max() * 1e3))

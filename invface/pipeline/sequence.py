@@ -153,8 +153,8 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
     ``keep``: each summary's "fit" holds the frame's FrameFit (None when skipped).
     A frame of a longer clip that cannot be fitted at all (no face found, no kind finished)
     is reported in its summary's "error" and the run goes on. A sequence frame's page has the
-    plate, render and curve pictures only (``invface report`` on its folder adds the rest). ``fit_frame`` options
-    (iterations, shading, lam_curves, solver, title, notes). Returns one summary dict per
+    plate, render and curve pictures only (``invface report`` on its folder adds the rest).
+    ``fit_frame`` options (iterations, shading, lam_curves, solver, title, notes). Returns one summary dict per
     frame: {name, index, time, skipped, kinds: {kind: {curve_rms_px, flagged}}, failed, error}."""
     from ..fit.landmarks import LandmarkTracker
     kinds = model_kinds(kinds)

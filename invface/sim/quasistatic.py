@@ -266,11 +266,11 @@ class Simulator:
             H = warm.newton_data if warm is not None and warm.converged else None
             while h >= 1.0 / self.MIN_STEP:
                 t1 = min(1.0, t + h)
-                a_t, j_t, tr = inputs(t1)
-                start = self._start(X, inputs(t)[1], j_t)
+                here, there = inputs(t), inputs(t1)
+                a_t, j_t, tr = there
+                start = self._start(X, here[1], j_t)
                 if H is not None:
-                    start = self._better_start(start, self._tangent_start(X, H, inputs(t), inputs(t1), secs),
-                                               a_t, j_t, tr)
+                    start = self._better_start(start, self._tangent_start(X, H, here, there, secs), a_t, j_t, tr)
                 step = self._newton(start, a_t, j_t, tr, rtol if t1 == 1.0 else 1e-4,
                                     max_iter, progress, secs)
                 steps, total = steps + 1, total + step[2]
