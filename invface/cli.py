@@ -309,7 +309,7 @@ def cmd_fit_plate(args):
     kinds = model_kinds(args.model_kind)
     out = Path(args.output) if args.output else Path("reports") / "fit-plate" / Path(args.plate).stem
     run = {}
-    identity = len(clip) > 1 and not args.no_identity
+    identity = not args.no_identity
     frame = pose = None
     if not args.calib or identity:
         if args.neutral_frame is not None:
@@ -336,11 +336,16 @@ def cmd_fit_plate(args):
         actor = out / "actor.npz"
         if actor.is_file() and before.get("identity_from") == frame.digest:
             print(f"reusing {actor}: the actor's identity from {frame.name}, made by the run being resumed", flush=True)
+            run["identity"] = before.get("identity", "")
         else:
             print(f"the actor's identity from the curves of {frame.name}", flush=True)
-            adapted, _ = actor_identity(model, frame, curves, lam=args.curve_lambda, pose=pose, progress=_events)
+            adapted, fit = actor_identity(model, frame, curves, lam=args.curve_lambda, pose=pose, progress=_events)
             out.mkdir(parents=True, exist_ok=True)
             adapted.save(actor)
+            run["identity"] = (f"The model was adapted to the face of {frame.name} first ({fit.describe()}; "
+                               f"{actor.name})" if adapted is not model else
+                               f"The model is used as it is: the identity fit on {frame.name} moved it too far "
+                               f"({fit.describe()})")
         model = FaceModel.load(actor)      # as a resumed run reads it: the same bytes, the same run hash
         run["identity_from"] = frame.digest
     if args.calib:
@@ -507,8 +512,9 @@ def build_parser():
                          "image Jacobians) or L-BFGS-B on adjoint gradients (for many controls)")
     fp.add_argument("--no-shading", action="store_true", help="curves only (Eq. 15)")
     fp.add_argument("--no-identity", action="store_true",
-                    help="sequences: fit with the model as it is (default: its neutral first adapted to the "
-                         "actor from the calibration frame's curves, written to DIR/actor.npz)")
+                    help="fit with the model as it is (default: its neutral first adapted to the actor, its "
+                         "proportions and a smooth field, from the curves of the photo or of a sequence's "
+                         "calibration frame, written to DIR/actor.npz)")
     fp.add_argument("--restart", "--force", dest="restart", action="store_true",
                     help="start over: replace an earlier run's fits in the output folder (a rerun with the same "
                          "inputs otherwise resumes it, skipping the frames already fitted)")

@@ -49,3 +49,18 @@ def test_identity_from_one_frame_carries_to_other_expressions(small_expressive_m
     assert after < 0.5 * before, (before, after)
     same = fit_identity(m, cam, _curves(m, cam, p), p, ROT, TR)
     assert same.max_mm < 0.01 and same.rms_after < 1e-3
+
+
+def test_identity_finds_the_face_proportions(small_expressive_model):
+    """A wider, shorter face (width x1.06, height x0.95, depth their geometric mean): the
+    proportions stage recovers both scales, and the field left after them stays small."""
+    m = small_expressive_model
+    cam = Camera.front_view(360, 270)
+    p = np.zeros(FitVector.of(m).P)
+    s = np.array([1.06, 0.95, np.sqrt(1.06 * 0.95)])
+    c = m.neutral[np.concatenate([m.curves[k] for k in m.curves])].mean(0)
+    truth = _with_neutral(m, c + (m.neutral - c) * s)
+    fit = fit_identity(m, cam, _curves(truth, cam, p), p, ROT, TR)
+    assert np.abs(np.exp(fit.proportions[:2]) - s[:2]).max() < 0.01, fit.proportions
+    assert fit.rms_after < 0.2 * fit.rms_before
+    assert fit.max_mm < 1.0, fit.max_mm

@@ -83,10 +83,14 @@ def test_a_real_photo_fits_end_to_end_with_both_models(photo, tmp_path):
         assert np.abs(fit["rotation"]).max() < 1.2, fit["rotation"]
         assert fit["curve_rms_px"] < 10.0, fit["curve_rms_px_by_curve"]
         assert set(fit["curve_rms_px_by_curve"]) >= {"lip_outer_upper", "eye_L_upper", "jaw_line"}
-    # the simulation stage starts from the blendshape stage and must not lose the face
-    assert fits["simulation"]["curve_rms_px"] < 1.5 * fits["blendshape"]["curve_rms_px"] + 0.5
+    # the simulation stage starts from the blendshape stage and must not lose the face (after the
+    # identity its inner lower lip stays 1-3 px off where the rig's meets the photo: RESULTS.md)
+    assert fits["simulation"]["curve_rms_px"] < fits["blendshape"]["curve_rms_px"] + 2.5
     assert fits["simulation"]["activations"] and max(fits["simulation"]["activations"].values()) > 0.0
     assert "calibrated in" in r.stdout and (out / "calib.npz").is_file()
+    # the actor's identity first (its proportions and field), said on the page
+    assert (out / "actor.npz").is_file() and "face width x" in r.stdout
+    assert "The model was adapted to the face of" in page or "The model is used as it is" in page
 
 
 @needs_detector

@@ -15,6 +15,22 @@ Delta: the surface's finite-volume Laplacian (``morph.surface.fv_laplacian``), s
 smooth over ``IDENTITY_LENGTH`` and cannot copy the frame's pixel noise into the face; the
 small eps term keeps the field near zero where no curve is (the depth along the view is only
 known through the smoothness). Gauss-Newton on the foot points, each step one sparse solve.
+
+Before the field, the head's proportions, smooth over the whole head (paper 001 morphs a
+template onto a face the same way, global shape first): the neutral about the curves' centre
+c, with y = (Y - c_y) / 0.1 m,
+
+    x' = x e^a (1 + t y),   y' = y e^b (1 + v y),   z' = z e^((a + b)/2)
+
+(width and its taper with height, height and the lower face's against the upper face's;
+the depth, not seen from the front, follows the mean scale). Faces differ most in these: on
+the real photos the field alone moved every curve by 4-8 mm and the jaw line by up to 15 mm.
+Each parameter is held near zero by a prior that costs as much as the curves' pixels at 1 px
+when it reaches ``IDENTITY_MAX_SCALE``. The jaw line is a silhouette: the face's outline, where
+the surface turns away, not a line of fixed vertices. It steers the proportions fully but the
+field only at ``SILHOUETTE_WEIGHT``: at full weight the field pulled the outline's vertices out
+alone, into lumps at the cheeks of a round face (13 mm at ear height). On the real clip's frames
+not fitted this costs 0.06 px against full weight; on 0-f15-hao it leaves the lumps small.
 """
 from __future__ import annotations
 
@@ -32,21 +48,30 @@ from .pose import pose_points
 IDENTITY_LENGTH = 0.007     # m: the smoothness scale of the identity field (a third of an eye's width;
                             # on the real clip 0.012 left 2.05 px on frames not fitted, 0.007 1.9 px)
 IDENTITY_ANCHOR = 0.06      # m: beyond this from the curves the field fades to zero
-IDENTITY_MAX_MM = 12.0      # a larger correction is not an identity: not applied (wrong frame or curves)
+IDENTITY_MAX_MM = 20.0      # a larger field (after the proportions) is not an identity: not applied (wrong frame or
+                            # curves); on the real photos the fields reach 7-12 mm
+IDENTITY_MAX_SCALE = 0.15   # the proportions' prior: each parameter's +- this costs as much as the curves at 1 px
+SILHOUETTES = ("jaw_line",)  # outline curves: they steer the proportions, and the field only weakly,
+SILHOUETTE_WEIGHT = 0.3      # with this weight on their squared residuals
 
 
 @dataclass
 class IdentityFit:
-    """displacement (V,3) m of the neutral; rms_before / rms_after px on the fitting frame;
-    max_mm: the largest vertex displacement."""
+    """displacement (V,3) m of the neutral (the proportions' scale and the field together);
+    rms_before / rms_after px of all the curves on the fitting frame; proportions (4,): (a, b,
+    t, v) of the module's docstring; max_mm: the field's largest vertex displacement beyond
+    the proportions."""
     displacement: np.ndarray
     rms_before: float
     rms_after: float
     max_mm: float
+    proportions: np.ndarray
 
     def describe(self):
+        a, b = self.proportions[:2]
         return (f"identity from the curves: curve RMS {self.rms_before:.2f} -> {self.rms_after:.2f} px on the "
-                f"fitting frame, neutral moved up to {self.max_mm:.1f} mm")
+                f"fitting frame; face width x{np.exp(a):.3f}, height x{np.exp(b):.3f}, then moved up to "
+                f"{self.max_mm:.1f} mm")
 
 
 def _operators(model):
@@ -56,51 +81,91 @@ def _operators(model):
     return (A @ Minv @ A).tocsr(), sp.diags(area)
 
 
-def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, length=IDENTITY_LENGTH):
+def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, length=IDENTITY_LENGTH,
+                 silhouette=SILHOUETTE_WEIGHT):
     """Smooth neutral correction (IdentityFit) so that the model at controls p (P,), posed by
     rotation (3,) rad and translation (3,) m, meets the plate curves {name: (n,2) px} seen by
-    ``camera``. The weight mu of the bi-Laplacian is set so that a correction of width
-    ``length`` (m) costs as much as a pixel at each of the vertices of a curve across it:
-    mu = (k length)^2 n_per_length, with k the camera's px per metre at the face."""
-    obj = CurveObjective(model, model.surface_model("blendshape"), camera, curves, 0.0)
-    if not obj.curves:
+    ``camera``: the proportions, then the field. The weight mu of the field's bi-Laplacian is
+    set so that a correction of width ``length`` (m) costs as much as a pixel at each of the
+    vertices of a curve across it: mu = (k length)^2 n_per_length, with k the camera's px per
+    metre at the face."""
+    sm = model.surface_model("blendshape")
+    everything = CurveObjective(model, sm, camera, curves, 0.0)
+    if not everything.curves:
         raise InvfaceError("identity: none of the plate curves is a model curve")
-    x = model.surface_model("blendshape").surface(np.asarray(p, float))
+    inner = CurveObjective(model, sm, camera, {k: v for k, v in curves.items() if k not in SILHOUETTES}, 0.0)
+    outline = CurveObjective(model, sm, camera, {k: v for k, v in curves.items() if k in SILHOUETTES}, 0.0)
+    x = sm.surface(np.asarray(p, float))
     R = euler_xyz(np.asarray(rotation, float))
     V = len(x)
-    K, M = _operators(model)
-    depth = float(np.median((pose_points(x, rotation, translation) @ camera.R.T + camera.t)[:, 2]))
-    k = float(camera.K[0, 0]) / max(depth, 1e-6)                       # px per metre at the face
-    spacing = float(np.median([np.linalg.norm(np.diff(x[v], axis=0), axis=1).mean() for v in obj.vertices.values()]))
-    mu = (k * length) ** 2 * (length / spacing)
-    eps = mu / IDENTITY_ANCHOR ** 4
-    reg = sp.kron(mu * K + eps * M, sp.eye(3)).tocsr()
-    d = np.zeros((V, 3))
 
-    def data(d):
+    def data(d, *objs):
+        """Signed distances (n,) px, their gradient (V,3) of 1/2 |r|^2 and per curve (vertex ids,
+        d r / d d (n,3)) of the model displaced by d (V,3) m; objs: (CurveObjective, weight) pairs."""
         xr = pose_points(x + d, rotation, translation)
-        rows, g, blocks = [], np.zeros((V, 3)), []
-        for vid, r, dr_dx in obj._signed(xr):
-            a = dr_dx @ R                         # d r / d d_i (n, 3): the correction is posed with the head
-            np.add.at(g, vid, r[:, None] * a)
-            rows.append(r)
-            blocks.append((vid, a))
+        rows, g, blocks = [np.zeros(0)], np.zeros((V, 3)), []
+        for obj, w in objs:
+            for vid, r, dr_dx in obj._signed(xr):
+                r, a = np.sqrt(w) * r, np.sqrt(w) * dr_dx @ R       # the correction is posed with the head
+                np.add.at(g, vid, r[:, None] * a)
+                rows.append(r)
+                blocks.append((vid, a))
         return np.concatenate(rows), g, blocks
 
-    r0, g, blocks = data(d)
-    r = r0
-    for _ in range(iterations):
-        vid = np.concatenate([v for v, _ in blocks])
-        a = np.concatenate([a for _, a in blocks])                          # (n, 3)
-        rows = 3 * vid[:, None, None] + np.arange(3)[None, :, None]          # (n, 3, 1)
-        cols = 3 * vid[:, None, None] + np.arange(3)[None, None, :]          # (n, 1, 3)
-        rows, cols = np.broadcast_arrays(rows, cols)
-        H = reg + sp.coo_matrix((np.einsum("ns,nt->nst", a, a).ravel(), (rows.ravel(), cols.ravel())),
-                                shape=(3 * V, 3 * V)).tocsr()
-        step = spsolve(H.tocsc(), -(reg @ d.ravel() + g.ravel())).reshape(V, 3)
-        d = d + step
-        r, g, blocks = data(d)
-        if np.abs(step).max() < 1e-6:
-            break
+    n0 = np.asarray(model.neutral, float)
+    r0 = data(0.0, (everything, 1.0))[0]
+    c = n0[np.concatenate(list(everything.vertices.values()))].mean(0)
+    D, q = _proportions(n0, c, lambda d: data(d, (everything, 1.0))[0])
+    d = np.zeros((V, 3))
+    field_terms = ((inner, 1.0), (outline, silhouette))
+    if inner.curves:
+        K, M = _operators(model)
+        depth = float(np.median((pose_points(x, rotation, translation) @ camera.R.T + camera.t)[:, 2]))
+        k = float(camera.K[0, 0]) / max(depth, 1e-6)                       # px per metre at the face
+        spacing = float(np.median([np.linalg.norm(np.diff(x[v], axis=0), axis=1).mean()
+                                   for v in inner.vertices.values()]))
+        mu = (k * length) ** 2 * (length / spacing)
+        reg = sp.kron(mu * K + mu / IDENTITY_ANCHOR ** 4 * M, sp.eye(3)).tocsr()
+        _, g, blocks = data(D, *field_terms)
+        for _ in range(iterations):
+            vid = np.concatenate([v for v, _ in blocks])
+            a = np.concatenate([a for _, a in blocks])                          # (n, 3)
+            rows = 3 * vid[:, None, None] + np.arange(3)[None, :, None]          # (n, 3, 1)
+            cols = 3 * vid[:, None, None] + np.arange(3)[None, None, :]          # (n, 1, 3)
+            rows, cols = np.broadcast_arrays(rows, cols)
+            H = reg + sp.coo_matrix((np.einsum("ns,nt->nst", a, a).ravel(), (rows.ravel(), cols.ravel())),
+                                    shape=(3 * V, 3 * V)).tocsr()
+            step = spsolve(H.tocsc(), -(reg @ d.ravel() + g.ravel())).reshape(V, 3)
+            d = d + step
+            _, g, blocks = data(D + d, *field_terms)
+            if np.abs(step).max() < 1e-6:
+                break
     rms = lambda r: rms_px({"all": r})         # noqa: E731
-    return IdentityFit(d, rms(r0), rms(r), float(np.linalg.norm(d, axis=1).max() * 1e3))
+    return IdentityFit(D + d, rms(r0), rms(data(D + d, (everything, 1.0))[0]),
+                       float(np.linalg.norm(d, axis=1).max() * 1e3), q)
+
+
+def _proportions(x, c, residuals, iterations=10, step=1e-4):
+    """The proportions of the module's docstring for the neutral x (V,3) m about c (3,): (their
+    displacement (V,3) m, the parameters (4,)). Gauss-Newton on ``residuals(d)`` (px, of a
+    displacement d (V,3)) with a finite-difference Jacobian and the prior
+    |q|^2 n / ln(1 + IDENTITY_MAX_SCALE)^2 (n residuals)."""
+    u = x - c
+    y = u[:, 1] / 0.1
+
+    def field(q):
+        a, b, t, v = q
+        return np.stack([u[:, 0] * np.exp(a) * (1 + t * y), u[:, 1] * np.exp(b) * (1 + v * y),
+                         u[:, 2] * np.exp(0.5 * (a + b))], 1) - u
+
+    q = np.zeros(4)
+    r = residuals(field(q))
+    w = len(r) / np.log1p(IDENTITY_MAX_SCALE) ** 2
+    for _ in range(iterations):
+        J = np.stack([(residuals(field(q + step * e)) - r) / step for e in np.eye(len(q))], 1)
+        dq = np.linalg.solve(J.T @ J + w * np.eye(len(q)), -(J.T @ r + w * q))
+        q = q + dq
+        r = residuals(field(q))
+        if np.abs(dq).max() < 1e-6:
+            break
+    return field(q), q

@@ -18,7 +18,8 @@ def earlier_fits(run):
 
 
 def run_notes(run, frame=None):
-    """Lines on what a fit run (its run.json, written as it starts) planned and is missing:
+    """Lines on what a fit run (its run.json, written as it starts) did first (the actor's
+    identity, on the run's own page) and planned and is missing:
     the kinds of ``frame`` (a sequence frame's name; None for a single plate) or the frames
     of a sequence that have no fit, and whether the run was stopped before it finished."""
     run = Path(run)
@@ -27,11 +28,12 @@ def run_notes(run, frame=None):
     except (OSError, ValueError):
         return []
     stopped = "" if plan.get("finished") else " (the run stopped before it finished)"
+    said = [plan["identity"] + "."] if frame is None and plan.get("identity") else []
     if frame is None and plan.get("frames"):
         found = {f.parent.parent.name for f in earlier_fits(run) if f.parent.parent != run}
         missing = [f for f in plan["frames"] if f not in found]
-        return [f"{len(missing)} of {len(plan['frames'])} frames have no fit{stopped}: " + ", ".join(missing[:10])
-                + (" ..." if len(missing) > 10 else "")] if missing else []
+        return said + ([f"{len(missing)} of {len(plan['frames'])} frames have no fit{stopped}: "
+                        + ", ".join(missing[:10]) + (" ..." if len(missing) > 10 else "")] if missing else [])
     folder = run if frame is None else run / frame
     missing = [k for k in plan.get("kinds", []) if not (folder / k / "fit.json").is_file()]
-    return [f"No {k} model fit here{stopped}." for k in missing] if missing and stopped else []
+    return said + ([f"No {k} model fit here{stopped}." for k in missing] if missing and stopped else [])
