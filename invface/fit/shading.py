@@ -1,7 +1,8 @@
 """Shape from shading on a plate: paper 000, Eq. 16.
 
     min_z  1/2 || E_2(z) ||^2 + lambda_1/2 || E_1(z) ||^2 + lambda_2/2 || w - w^ ||^2
-    E_2 = G(F* - F(x_R(z), gamma, c)),   lambda_1 = 1e-4, lambda_2 = 1,   z = (w, theta, t)
+    E_2 = G(F* - F(x_R(z), gamma, c)),   lambda_1 = 1e-2 (the paper: 1e-4; ``fit.lambdas``), lambda_2 = 1,
+    z = (w, theta, t)
 
 G is a three-level Gaussian pyramid (the 5x5 binomial blur and every other pixel of OpenCV's
 ``pyrDown``, written here as sparse separable matrices so that its adjoint is exact) of the
