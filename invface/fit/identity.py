@@ -88,7 +88,8 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
     ``camera``: the proportions, then the field. The weight mu of the field's bi-Laplacian is
     set so that a correction of width ``length`` (m) costs as much as a pixel at each of the
     vertices of a curve across it: mu = (k length)^2 n_per_length, with k the camera's px per
-    metre at the face."""
+    metre at the face; ``silhouette``: the weight of the outline curves (``SILHOUETTES``) in
+    the field."""
     sm = model.surface_model("blendshape")
     everything = CurveObjective(model, sm, camera, curves, 0.0)
     if not everything.curves:
