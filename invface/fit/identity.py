@@ -91,11 +91,11 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
     metre at the face; ``silhouette``: the weight of the outline curves (``SILHOUETTES``) in
     the field."""
     sm = model.surface_model("blendshape")
-    everything = CurveObjective(model, sm, camera, curves, 0.0)
-    if not everything.curves:
-        raise InvfaceError("identity: none of the plate curves is a model curve")
     inner = CurveObjective(model, sm, camera, {k: v for k, v in curves.items() if k not in SILHOUETTES}, 0.0)
     outline = CurveObjective(model, sm, camera, {k: v for k, v in curves.items() if k in SILHOUETTES}, 0.0)
+    if not inner.curves and not outline.curves:
+        raise InvfaceError("identity: none of the plate curves is a model curve")
+    every = ((inner, 1.0), (outline, 1.0))          # all curves at full weight: the proportions and the RMS
     x = sm.surface(np.asarray(p, float))
     R = euler_xyz(np.asarray(rotation, float))
     V = len(x)
@@ -114,9 +114,9 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
         return np.concatenate(rows), g, blocks
 
     n0 = np.asarray(model.neutral, float)
-    r0 = data(0.0, (everything, 1.0))[0]
-    c = n0[np.concatenate(list(everything.vertices.values()))].mean(0)
-    D, q = _proportions(n0, c, lambda d: data(d, (everything, 1.0))[0])
+    r0 = data(0.0, *every)[0]
+    c = n0[np.concatenate([v for obj, _ in every for v in obj.vertices.values()])].mean(0)
+    D, q = _proportions(n0, c, lambda d: data(d, *every)[0])
     d = np.zeros((V, 3))
     field_terms = ((inner, 1.0), (outline, silhouette))
     if inner.curves:
@@ -128,13 +128,13 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
         mu = (k * length) ** 2 * (length / spacing)
         reg = sp.kron(mu * K + mu / IDENTITY_ANCHOR ** 4 * M, sp.eye(3)).tocsr()
         _, g, blocks = data(D, *field_terms)
+        vid = np.concatenate([v for v, _ in blocks])                            # the same every step
+        rows = 3 * vid[:, None, None] + np.arange(3)[None, :, None]              # (n, 3, 1)
+        cols = 3 * vid[:, None, None] + np.arange(3)[None, None, :]              # (n, 1, 3)
+        rows, cols = (i.ravel() for i in np.broadcast_arrays(rows, cols))
         for _ in range(iterations):
-            vid = np.concatenate([v for v, _ in blocks])
             a = np.concatenate([a for _, a in blocks])                          # (n, 3)
-            rows = 3 * vid[:, None, None] + np.arange(3)[None, :, None]          # (n, 3, 1)
-            cols = 3 * vid[:, None, None] + np.arange(3)[None, None, :]          # (n, 1, 3)
-            rows, cols = np.broadcast_arrays(rows, cols)
-            H = reg + sp.coo_matrix((np.einsum("ns,nt->nst", a, a).ravel(), (rows.ravel(), cols.ravel())),
+            H = reg + sp.coo_matrix((np.einsum("ns,nt->nst", a, a).ravel(), (rows, cols)),
                                     shape=(3 * V, 3 * V)).tocsr()
             step = spsolve(H.tocsc(), -(reg @ d.ravel() + g.ravel())).reshape(V, 3)
             d = d + step
@@ -142,7 +142,7 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
             if np.abs(step).max() < 1e-6:
                 break
     rms = lambda r: rms_px({"all": r})         # noqa: E731
-    return IdentityFit(D + d, rms(r0), rms(data(D + d, (everything, 1.0))[0]),
+    return IdentityFit(D + d, rms(r0), rms(data(D + d, *every)[0]),
                        float(np.linalg.norm(d, axis=1).max() * 1e3), q)
 
 
