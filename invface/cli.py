@@ -492,7 +492,8 @@ def build_parser():
                                                       "most neutral-looking of 8 frames spread over the selection)")
     fp.add_argument("--temporal", type=float, default=TEMPORAL_LAMBDA,
                     help="weight of the temporal term between consecutive frames (px^2 per 0.1 weight, 0.01 rad "
-                         f"or 1 mm; scaled with the face like lambda_1; default {TEMPORAL_LAMBDA:g}, 0 = off)")
+                         f"or 1 mm; scaled with the face like lambda_1; shape from shading takes 0.1 of it; "
+                         f"default {TEMPORAL_LAMBDA:g}, 0 = off)")
     fp.add_argument("--workers", type=int, help="fit frames on a local Dask cluster of this many processes "
                                                 "(contiguous chunks, one per worker; default: this process)")
     fp.add_argument("--scheduler", help="address of a running Dask scheduler (tcp://HOST:8786) to fit on; "

@@ -91,7 +91,8 @@ def _sim_scene(m):
 def test_gradient_only_path_takes_one_adjoint_product(small_expressive_model):
     """ShadingObjective's (cost, gradient) for L-BFGS: through the Dr.Jit bridge, the
     simulation's surface_vjp once per evaluation and never its Jacobian; the gradient is the
-    dogleg path's J^T r of the same render (curves and prior included)."""
+    dogleg path's J^T r of the same render (curves, prior and a sequence's temporal term
+    included)."""
     from invface.fit.curves import PLATE_CURVES, projection_jacobian
     from invface.fit.pose import posed_surface
     from invface.fit.shading import ShadingObjective
@@ -100,7 +101,9 @@ def test_gradient_only_path_takes_one_adjoint_product(small_expressive_model):
     sm = m.surface_model("simulation")
     xr = posed_surface(sm, z, vec)[1]
     curves = {c: projection_jacobian(cam, xr[m.curves[c]])[0] + 0.7 for c in PLATE_CURVES}
-    obj = ShadingObjective(m, sm, cam, plate, g, a, vec.unpack(z)[0] * 0.9, curves, lam1=1e-3, spp=8)
+    previous = z + 0.5 * vec.scales() * np.sin(np.arange(vec.size))
+    obj = ShadingObjective(m, sm, cam, plate, g, a, vec.unpack(z)[0] * 0.9, curves, lam1=1e-3, spp=8,
+                           previous=previous, temporal=0.02)
     z1 = z.copy()
     z1[vec.weights] *= 0.8
     calls = {"vjp": 0, "jacobian": 0}
@@ -123,6 +126,7 @@ def test_gradient_only_path_takes_one_adjoint_product(small_expressive_model):
     finally:
         sm.surface_vjp, sm.surface_jacobian = vjp, jac
     assert obj.terms["curves"] > 0 and obj.terms["prior"] > 0
+    assert obj.terms["temporal"] == pytest.approx(0.01 * np.sum(((z1 - previous) / vec.scales()) ** 2))
 
 
 def test_readme_from_python_script_runs(small_expressive_model, tmp_path):

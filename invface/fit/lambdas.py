@@ -6,6 +6,7 @@ Eq. 14 (calibration): |F* - F(gamma, c)|^2 + EQ14_LAMBDA |L c|^2               (
 Eq. 15 (curves):     |E_1(w^)|^2 + EQ15_LAMBDA_1 |w^|^2                         (px^2)
 Eq. 16 (shading):    |E_2|^2 + EQ16_LAMBDA_1 |E_1|^2 + EQ16_LAMBDA_2 |w - w^|^2 (linear light)
 sequence frames:     Eq. 15 + TEMPORAL_LAMBDA |(z - z_prev) / scales|^2                (px^2)
+                     Eq. 16 + EQ16_TEMPORAL TEMPORAL_LAMBDA |(z - z_prev) / scales|^2  (linear light)
 
 The plate weights are the paper's for its plates, except EQ16_LAMBDA_1 (below). Eq. 15's residuals are pixels and Eq. 14's
 data term sums over the face's pixels, so both grow with the face's area in the image:
@@ -28,6 +29,10 @@ EQ16_LAMBDA_1 = 1e-2        # shading: weight of the curve term E_1 (px^2); the 
 EQ16_LAMBDA_2 = 1.0         # shading: pull towards the curve solution w^
 TEMPORAL_LAMBDA = 1.0       # sequences (ours): |z - z_prev|^2 in FitVector.scales() units (0.1 weight,
                             # 0.01 rad, 1 mm) added to Eq. 15, px^2 per unit^2 (scaled with the face)
+EQ16_TEMPORAL = 0.1         # sequences (ours): the temporal term in Eq. 16 at this times its Eq. 15 weight (linear
+                            # light per px^2). Real clip, 24 frames, blendshape kind: jitter 2.86 (0), 1.68 (0.01),
+                            # 0.53 (0.1), 0.33 (1) with curve RMS median 1.33-1.37 px and image RMS 0.043 throughout;
+                            # without it the head's depth jumped frame to frame (bench/RESULTS.md)
 
 SAMPLE_EYE_PX = 224.0       # outer eye-corner distance (px) on the sample plates (720x540, 30 deg)
 

@@ -11,12 +11,16 @@ no-deps step, so the README gives the one-line install. Nothing is downloaded at
 
 The detector's lip and eyelid contours map onto the model's curves of the same meaning
 (``PLATE_CURVES``); the actor's left eye is on the image's right in a frontal view. Its nose
-line (sellion to tip), nostril base (alar rim, subnasale, alar rim) and lower face oval (ear
+line (between the brows, 8, to the tip), nostril base (alar rim, subnasale, alar rim) and lower face oval (ear
 to ear under the chin) map onto the model's ``nose_bridge``, ``nose_base`` and ``jaw_line``.
 Eyes and lips alone lie near one plane, so on a face of another identity the head's pitch
 absorbed the difference in proportions (astronaut photo: 0.58 rad with eyes and lips, 0.81
 with the nose added, -0.01 with the jaw line too; the photo is frontal). The jaw line is the
 face's silhouette, which the model's fixed skin curve matches for near-frontal views only.
+The nose line starts at landmark 8, not at 168 (the root between the eyes): the model's
+curve starts at its sellion, the deepest point of the profile, which on real faces projected
+up to 9 px (5 mm) above 168, and a plate curve that ends below a model curve's end pulls that
+end down the nose (a curve's distance is to the nearest point of the plate's polyline).
 
 ``face_mask`` rasterises the detector's whole face oval (hairline to chin) less the eye and
 mouth openings: on a photo it keeps hair, background, eyeballs and teeth out of the
@@ -41,7 +45,7 @@ CURVE_INDICES = {
     "eye_R_lower": [33, 7, 163, 144, 145, 153, 154, 155, 133],
     "eye_L_upper": [263, 466, 388, 387, 386, 385, 384, 398, 362],
     "eye_L_lower": [263, 249, 390, 373, 374, 380, 381, 382, 362],
-    "nose_bridge": [168, 6, 197, 195, 5, 4, 1],
+    "nose_bridge": [8, 168, 6, 197, 195, 5, 4, 1],
     "nose_base": [98, 97, 2, 326, 327],
     "jaw_line": [132, 58, 172, 136, 150, 149, 176, 148, 152, 377, 400, 378, 379, 365, 397, 288, 361],
 }

@@ -30,7 +30,7 @@ import numpy as np
 from ..errors import ImageError, InvfaceError, SimulationError
 from ..model.controls import FitVector
 from .curves import CurveObjective, fit_curves, projection_jacobian, rms_px
-from .lambdas import EQ15_LAMBDA_1
+from .lambdas import EQ15_LAMBDA_1, EQ16_TEMPORAL
 from .pose import posed_surface, unpose_points
 from .results import NamedControls, write_fit_files
 from .shading import fit_shading
@@ -98,8 +98,8 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     previous frame's PlateFit (sequence mode: its controls and pose start this frame);
     lam_curves: lambda_1 of Eq. 15 (px^2 per unit weight^2); solver: "dogleg" or "lbfgs" for
     the shading stages (``fit.shading.fit_shading``); temporal: with a ``start``, the weight of
-    the temporal term of the curve stage (``fit_curves``; the shading stages are tied to the
-    curve stage's controls by Eq. 16's lambda_2). Returns a PlateFit."""
+    the temporal term of the curve stage (``fit_curves``); the shading stages take it times
+    ``EQ16_TEMPORAL``. Returns a PlateFit."""
     if kind not in ("blendshape", "simulation"):
         raise InvfaceError(f"unknown model kind '{kind}': use 'blendshape' or 'simulation'")
     check_plate(plate.image, plate.path)
@@ -113,6 +113,7 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     rot = calibration.rotation if start is None else start.rotation
     tr = calibration.translation if start is None else start.translation
     previous = None if start is None else FitVector.of(model).pack(start.p, start.rotation, start.translation)
+    temporal_shading = EQ16_TEMPORAL * temporal         # the curve stage's weight, in Eq. 16's units
     cf = fit_curves(model, cam, curves, kind="blendshape", lam=lam_curves, p0=p0, rotation=rot,
                     translation=tr, max_iter=max_iter_curves, previous=previous, temporal=temporal,
                     progress=lambda h: say(dict(h, stage="curves")))
@@ -125,7 +126,8 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     for stage, skind, ftol in stages if shading else []:
         t1 = time.perf_counter()
         shade = dict(kind=skind, curves=curves, mask=plate.mask, max_iter=max_iter_shading, spp=spp,
-                     ftol=ftol, solver=solver, progress=lambda h: say(dict(h, stage=stage)))
+                     ftol=ftol, solver=solver, previous=previous, temporal=temporal_shading,
+                     progress=lambda h: say(dict(h, stage=stage)))
         try:
             sf = fit_shading(model, cam, plate.image, calibration.gamma, calibration.albedo, cf.p, rot, tr,
                              p0=p, **shade)

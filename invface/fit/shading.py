@@ -4,6 +4,10 @@
     E_2 = G(F* - F(x_R(z), gamma, c)),   lambda_1 = 1e-2 (the paper: 1e-4; ``fit.lambdas``), lambda_2 = 1,
     z = (w, theta, t)
 
+In a sequence (ours, not the paper's) a temporal term lambda_t/2 || (z - z_prev) / s ||^2 joins
+it (s: ``FitVector.scales``), the previous frame's z_prev; the depth of the head is what the
+image term alone pins least, and without the term it jumps frame to frame.
+
 G is a three-level Gaussian pyramid (the 5x5 binomial blur and every other pixel of OpenCV's
 ``pyrDown``, written here as sparse separable matrices so that its adjoint is exact) of the
 per-pixel RGB differences between the plate F* and the render F (linear light), gamma and
@@ -131,7 +135,7 @@ class ShadingObjective:
 
     def __init__(self, model, surface_model, camera, plate, gamma, albedo, p_hat, curves=None,
                  lam1=EQ16_LAMBDA_1, lam2=EQ16_LAMBDA_2, mask=None, spp=8, silhouette_spp=0.5, seed=1, window=None,
-                 jacobian_spp=2, backplate=None, robust=ROBUST_DELTA):
+                 jacobian_spp=2, backplate=None, robust=ROBUST_DELTA, previous=None, temporal=0.0):
         import drjit as dr
         self.dr = dr
         self.model, self.sm = model, surface_model
@@ -152,19 +156,32 @@ class ShadingObjective:
                                      seed=seed, backplate=plate if backplate is None else backplate, crop=window)
         self.p_hat, self.lam1, self.lam2 = np.asarray(p_hat, float), lam1, lam2
         self.jacobian_spp = int(jacobian_spp)
+        # the temporal rows sqrt(lambda_t) (z - z_prev) / s, or none
+        self.previous = None if previous is None or temporal <= 0 else np.asarray(previous, float)
+        self.temporal_row = None if self.previous is None else np.sqrt(temporal) / self.vec.scales()
         self.robust = None if not robust else float(robust)
         self.curves = CurveObjective(model, surface_model, camera, curves, 0.0) if curves else None
         self.terms = {}
         from ..bridge import PosedSurfaceFunction
         self.bridge = PosedSurfaceFunction(surface_model, self.vec)     # the gradient-only path's
 
-    def _prior_and_curves(self, z, xr, Jall=None):
-        """Residual rows of the prior and curve terms at z (posed surface xr), scaled by the
-        square roots of their weights, the prior's K+6 rows first: (rows (n,), their Jacobian
-        (n, z size), or None without Jall)."""
+    def _prior_rows(self, z):
+        """The prior's K+6 rows, then the temporal term's z-size rows in a sequence: (rows,
+        their Jacobian (n, z size)); both are linear in z."""
         vec = self.vec
         rows = [np.sqrt(self.lam2) * (z[vec.controls] - self.p_hat)]
-        jac = [np.sqrt(self.lam2) * np.eye(vec.P, vec.size)] if Jall is not None else None
+        jac = [np.sqrt(self.lam2) * np.eye(vec.P, vec.size)]
+        if self.previous is not None:
+            rows.append(self.temporal_row * (z - self.previous))
+            jac.append(np.diag(self.temporal_row))
+        return np.concatenate(rows), np.vstack(jac)
+
+    def _prior_and_curves(self, z, xr, Jall=None):
+        """Residual rows of the prior, temporal and curve terms at z (posed surface xr), scaled
+        by the square roots of their weights, in that order (``_prior_rows`` first): (rows (n,),
+        their Jacobian (n, z size), or None without Jall)."""
+        rp, Jp = self._prior_rows(z)
+        rows, jac = [rp], ([Jp] if Jall is not None else None)
         if self.curves is not None:
             if Jall is None:
                 rows += [np.sqrt(self.lam1) * np.linalg.norm(d, axis=1) for d in self.curves.residuals(xr).values()]
@@ -175,11 +192,14 @@ class ShadingObjective:
         return np.concatenate(rows), (None if jac is None else np.vstack(jac))
 
     def _cost(self, r_image, r_rest):
-        """Eq. 16's value from the image rows and the prior and curve rows; ``terms`` keeps
-        its three parts."""
+        """Eq. 16's value from the image rows and the prior, temporal and curve rows
+        (``_prior_and_curves``); ``terms`` keeps its parts."""
         P = self.vec.P
-        self.terms = {"image": 0.5 * float(r_image @ r_image), "prior": 0.5 * float(r_rest[:P] @ r_rest[:P]),
-                      "curves": 0.5 * float(r_rest[P:] @ r_rest[P:])}
+        T = P if self.previous is None else P + self.vec.size
+        part = lambda r: 0.5 * float(r @ r)
+        self.terms = {"image": part(r_image), "prior": part(r_rest[:P]), "curves": part(r_rest[T:])}
+        if self.previous is not None:
+            self.terms["temporal"] = part(r_rest[P:T])
         return sum(self.terms.values())
 
     def _render(self, xr):
@@ -211,7 +231,7 @@ class ShadingObjective:
         back-substitution for the simulation), not its Jacobian. The curve term's gradient
         with respect to x_R joins the same backward pass. Same positions, render and cost as
         ``normal_equations``."""
-        dr, mi, vec = self.dr, self.renderer.mi, self.vec
+        dr, mi = self.dr, self.renderer.mi
         z = np.asarray(z, np.float64)
         zd = mi.Float(z.astype(np.float32))
         dr.enable_grad(zd)
@@ -220,7 +240,7 @@ class ShadingObjective:
         img = self.renderer.render(xr, self.gamma, self.albedo)
         r = self.G(np.array(img, np.float32)[..., :3] * self.mask) - self.target
         psi, dpsi = huber_rows(r, self.robust)
-        prior = np.sqrt(self.lam2) * (z[vec.controls] - self.p_hat)
+        prior, Jp = self._prior_rows(z)
         rows, g_xr = [prior], np.zeros_like(xr_np)
         if self.curves is not None:
             rc, g_xr = self.curves.position_gradient(xr_np)
@@ -228,8 +248,7 @@ class ShadingObjective:
             g_xr = self.lam1 * g_xr
         dr.backward(dr.sum(img.array * self._image_adjoint(psi * dpsi).array)
                     + dr.sum(xr * mi.Float(g_xr.astype(np.float32).ravel())))
-        g = np.array(dr.grad(zd), np.float64)
-        g[vec.controls] += np.sqrt(self.lam2) * prior
+        g = np.array(dr.grad(zd), np.float64) + prior @ Jp
         return self._cost(psi, np.concatenate(rows)), g
 
     def normal_equations(self, z):
@@ -330,7 +349,7 @@ def face_window(camera, xr, margin=0.15, align=1 << (LEVELS - 1)):
 
 def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translation, kind="blendshape",
                 curves=None, lam1=EQ16_LAMBDA_1, lam2=EQ16_LAMBDA_2, mask=None, max_iter=25, p0=None,
-                solver="dogleg", ftol=5e-3, restarts=2, progress=None, **render):
+                solver="dogleg", ftol=5e-3, restarts=2, previous=None, temporal=0.0, progress=None, **render):
     """Solve Eq. 16 from the curve solution (p_hat (K+6,), rotation (3,), translation (3,)), or
     from p0 (K+6,) when given (p_hat stays the prior's centre).
 
@@ -341,7 +360,8 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     "lbfgs" (the gradient-only path: L-BFGS-B on adjoint gradients, one render and one
     backward pass per evaluation, for parameter counts where K+12 forward passes are too
     many); max_iter: iterations of either; ftol: the dogleg stops after a step that lowers
-    the cost by less than this fraction. ``render`` options go to ``ShadingObjective`` (spp,
+    the cost by less than this fraction; previous (z size,) and temporal (linear light^2 per
+    ``FitVector.scales()`` unit^2): a sequence's previous frame and the temporal term's weight. ``render`` options go to ``ShadingObjective`` (spp,
     silhouette_spp, seed, jacobian_spp, backplate: default the plate with the head filled in
     from its surroundings). Returns a ShadingFit."""
     from .dogleg import dogleg
@@ -352,7 +372,7 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     if "backplate" not in render:
         render["backplate"] = background_plate(plate, head_silhouette(camera, xr0, model.triangles))
     obj = ShadingObjective(model, sm, camera, plate, gamma, albedo, p_hat, curves, lam1, lam2, mask,
-                           window=window, **render)
+                           window=window, previous=previous, temporal=temporal, **render)
     # one unit of the optimiser's variables (``FitVector.scales``): the balance evens out the
     # curvature the solvers see; the size sets L-BFGS's first trial step and the dogleg's
     # first trust radius (a unit step of a weight by 1 or the head by 0.1 rad overshot to
