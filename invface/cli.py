@@ -301,8 +301,9 @@ def cmd_fit_plate(args):
         raise InvfaceError(f"--iterations {args.iterations}: give 0 or more shape-from-shading iterations")
     if args.workers is not None and args.workers < 1:
         raise InvfaceError(f"--workers {args.workers}: give 1 or more worker processes")
-    if args.temporal < 0:
-        raise InvfaceError(f"--temporal {args.temporal}: give 0 (off) or a positive weight")
+    for name in ("temporal", "temporal_shading"):
+        if getattr(args, name) < 0:
+            raise InvfaceError(f"--{name.replace('_', '-')} {getattr(args, name)}: give 0 (off) or a positive weight")
     model = _load_model(args.model, args.resolution)
     clip = open_clip(args.plate, args.frames, args.camera)
     print(clip.describe(), flush=True)
@@ -361,7 +362,7 @@ def cmd_fit_plate(args):
                              lam_curves=args.curve_lambda)          # its warnings go into the fit's notes
         run.update(calibrated_on=frame.digest, calibration_frame=frame.name)
     options = dict(iterations=args.iterations, shading=not args.no_shading, lam_curves=args.curve_lambda,
-                   solver=args.solver, temporal=args.temporal)
+                   solver=args.solver, temporal=args.temporal, temporal_shading=args.temporal_shading)
     _fit_frames(model, clip, cal, kinds, out, options, curves=args.curves, force=args.restart,
                 workers=args.workers, scheduler=args.scheduler, run=run)
     return 0
@@ -423,7 +424,7 @@ CURVE_LAMBDA_HELP = ("weight regulariser lambda_1 of the curve fit, Eq. 15 (px^2
 
 
 def build_parser():
-    from .fit.lambdas import EQ13_LAMBDA, TEMPORAL_LAMBDA
+    from .fit.lambdas import EQ13_LAMBDA, EQ16_TEMPORAL, TEMPORAL_LAMBDA
     p = argparse.ArgumentParser(prog="invface", description="Anatomically based, differentiable face capture.")
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("build-model", help="build (or inspect) a FaceModel bundle")
@@ -492,8 +493,10 @@ def build_parser():
                                                       "most neutral-looking of 8 frames spread over the selection)")
     fp.add_argument("--temporal", type=float, default=TEMPORAL_LAMBDA,
                     help="weight of the temporal term between consecutive frames (px^2 per 0.1 weight, 0.01 rad "
-                         f"or 1 mm; scaled with the face like lambda_1; shape from shading takes 0.1 of it; "
-                         f"default {TEMPORAL_LAMBDA:g}, 0 = off)")
+                         f"or 1 mm; scaled with the face like lambda_1; default {TEMPORAL_LAMBDA:g}, 0 = off)")
+    fp.add_argument("--temporal-shading", type=float, default=EQ16_TEMPORAL,
+                    help="the temporal term's weight in shape from shading (Eq. 16), as a share of --temporal "
+                         f"(linear light per px^2; default {EQ16_TEMPORAL:g}, 0 = curve stage only)")
     fp.add_argument("--workers", type=int, help="fit frames on a local Dask cluster of this many processes "
                                                 "(contiguous chunks, one per worker; default: this process)")
     fp.add_argument("--scheduler", help="address of a running Dask scheduler (tcp://HOST:8786) to fit on; "

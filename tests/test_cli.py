@@ -248,7 +248,7 @@ def test_report_names_a_truncated_fit_file_and_bad_numbers_are_refused(tmp_path,
     r = run("fit-plate", str(tmp_path / "fit.json"), "--iterations", "-1")
     assert r.returncode == 2 and "--iterations -1" in r.stderr and "Traceback" not in r.stderr
     from invface.cli import main
-    for option, value in (("--workers", "0"), ("--temporal", "-1")):      # refused before any work
+    for option, value in (("--workers", "0"), ("--temporal", "-1"), ("--temporal-shading", "-0.5")):
         assert main(["fit-plate", str(tmp_path / "fit.json"), option, value]) == 2
         assert f"{option} {value}" in capsys.readouterr().err
 

@@ -91,7 +91,8 @@ def check_plate(plate, path=""):
 
 def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, shading=True,
               max_iter_curves=200, max_iter_shading=25, spp=8,
-              lam_curves=EQ15_LAMBDA_1, solver="dogleg", temporal=0.0, progress=None):
+              lam_curves=EQ15_LAMBDA_1, solver="dogleg", temporal=0.0, temporal_shading=EQ16_TEMPORAL,
+              progress=None):
     """Fit one plate. plate: ``render.plates.Plate`` (linear, undistorted; its mask, if any,
     restricts the shading term); calibration: ``fit.calibrate.Calibration`` (gamma, albedo);
     curves: {name: (n, 2) px} plate curves; kind: "blendshape" or "simulation"; start: the
@@ -99,7 +100,7 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     lam_curves: lambda_1 of Eq. 15 (px^2 per unit weight^2); solver: "dogleg" or "lbfgs" for
     the shading stages (``fit.shading.fit_shading``); temporal: with a ``start``, the weight of
     the temporal term of the curve stage (``fit_curves``); the shading stages take it times
-    ``EQ16_TEMPORAL``. Returns a PlateFit."""
+    temporal_shading (linear light per px^2). Returns a PlateFit."""
     if kind not in ("blendshape", "simulation"):
         raise InvfaceError(f"unknown model kind '{kind}': use 'blendshape' or 'simulation'")
     check_plate(plate.image, plate.path)
@@ -113,7 +114,6 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     rot = calibration.rotation if start is None else start.rotation
     tr = calibration.translation if start is None else start.translation
     previous = None if start is None else FitVector.of(model).pack(start.p, start.rotation, start.translation)
-    temporal_shading = EQ16_TEMPORAL * temporal         # the curve stage's weight, in Eq. 16's units
     cf = fit_curves(model, cam, curves, kind="blendshape", lam=lam_curves, p0=p0, rotation=rot,
                     translation=tr, max_iter=max_iter_curves, previous=previous, temporal=temporal,
                     progress=lambda h: say(dict(h, stage="curves")))
@@ -126,7 +126,7 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     for stage, skind, ftol in stages if shading else []:
         t1 = time.perf_counter()
         shade = dict(kind=skind, curves=curves, mask=plate.mask, max_iter=max_iter_shading, spp=spp,
-                     ftol=ftol, solver=solver, previous=previous, temporal=temporal_shading,
+                     ftol=ftol, solver=solver, previous=previous, temporal=temporal_shading * temporal,
                      progress=lambda h: say(dict(h, stage=stage)))
         try:
             sf = fit_shading(model, cam, plate.image, calibration.gamma, calibration.albedo, cf.p, rot, tr,

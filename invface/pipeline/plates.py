@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import InvfaceError, SimulationError
 from ..fit.curves import rms_px
-from ..fit.lambdas import EQ14_LAMBDA, EQ15_LAMBDA_1, face_scale
+from ..fit.lambdas import EQ14_LAMBDA, EQ15_LAMBDA_1, EQ16_TEMPORAL, face_scale
 
 KINDS = ("blendshape", "simulation")
 DETECTOR = "landmark detector"
@@ -342,7 +342,7 @@ class FrameFit:
 
 def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), starts=None, iterations=25,
               shading=True, lam_curves=None, solver="dogleg", notes=(), title=None, progress=None,
-              on_kind=None, source=None, camera=None, detector=None, temporal=0.0):
+              on_kind=None, source=None, camera=None, detector=None, temporal=0.0, temporal_shading=EQ16_TEMPORAL):
     """Fit one plate with each model kind (paper 000, Eq. 15 then 16). plate: a Plate or a path;
     calibration: a Calibration or PlateCalibration of this model and camera set-up; curves:
     see ``find_curves`` (source: where given curves came from, for the report); starts: {kind: PlateFit} of the previous frame (warm start);
@@ -350,7 +350,8 @@ def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), sta
     on_kind(frame, kind): called as each kind finishes (to write it at once); camera: for a
     plate path (see ``render.plates.load_plate``); detector: see ``find_curves``; temporal: the
     weight of the temporal term to the ``starts`` (``fit.curves.fit_curves``; px^2 per
-    scale unit^2, scaled here with the face like lambda_1). A kind whose simulation cannot reach an
+    scale unit^2, scaled here with the face like lambda_1); temporal_shading: the shading
+    stages' share of it (``fit.fit_plate``). A kind whose simulation cannot reach an
     equilibrium is recorded in ``FrameFit.failed`` and the other kinds go on. Returns a
     FrameFit."""
     from ..fit.curves import check_curves
@@ -361,7 +362,8 @@ def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), sta
     source = source or found
     lam = curve_lambda(curves, lam_curves)
     frame = FrameFit(model=model, plate=plate, curves=curves, source=source, notes=list(notes), title=title,
-                     options={"curve_lambda": lam, "solver": solver, "temporal": temporal},
+                     options={"curve_lambda": lam, "solver": solver, "temporal": temporal,
+                              "temporal_shading": temporal_shading},
                      warnings=check_curves(curves, plate.camera.size, source)
                      + (checked.warnings() if isinstance(checked, PlateCalibration) else []))
     truth = truth_beside(plate)
@@ -371,7 +373,8 @@ def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), sta
         try:
             fit = fit_plate(model, plate, calibration, curves, kind=kind, start=(starts or {}).get(kind),
                             shading=shading, max_iter_shading=iterations, lam_curves=lam, solver=solver,
-                            temporal=temporal * face_scale(curves)[0], progress=log)
+                            temporal=temporal * face_scale(curves)[0], temporal_shading=temporal_shading,
+                            progress=log)
         except SimulationError as e:
             # the other kinds still finish and are written; the report says why this one is missing
             frame.failed[kind] = str(e)

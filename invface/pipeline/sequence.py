@@ -33,7 +33,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..errors import InvfaceError
-from ..fit.lambdas import TEMPORAL_LAMBDA
+from ..fit.lambdas import EQ16_TEMPORAL, TEMPORAL_LAMBDA
 from ..jsonfile import write_object
 from .clips import open_clip
 from .plates import _say, fit_frame, model_kinds
@@ -247,6 +247,7 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
                            "frame (or let the detector find each frame's curves)")
     kinds = model_kinds(kinds)
     options.setdefault("temporal", TEMPORAL_LAMBDA)
+    options.setdefault("temporal_shading", EQ16_TEMPORAL)
     inputs = run_hash(model, calibration, dict(options, curves=str(curves) if curves is not None else None))
     if out is not None and start_run(out, clip.names if len(clip) > 1 else [], kinds, force, inputs, extra):
         _say(progress, message=f"{out}: resuming the run there (same inputs): its finished frames are skipped")
