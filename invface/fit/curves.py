@@ -198,7 +198,7 @@ class CurveObjective:
         """Signed distances (lists of (n,) px per curve) and their Jacobians ((n, z size) each)
         at the posed surface xr (V, 3) with d xr / dz = Jall (z size, V, 3)."""
         rows, jac = [], []
-        for vid, r, dr_dx in self._signed(xr):
+        for vid, r, dr_dx in self.signed(xr):
             rows.append(r)
             jac.append(np.einsum("ni,kni->nk", dr_dx, Jall[:, vid]))
         return rows, jac
@@ -207,12 +207,12 @@ class CurveObjective:
         """(signed distances (n,) px of all curves, their gradient (V, 3) of 1/2 |rows|^2 with
         respect to the posed vertices xr (V, 3)): the curve term for one adjoint product."""
         rows, g = [], np.zeros_like(np.asarray(xr, float))
-        for vid, r, dr_dx in self._signed(xr):
+        for vid, r, dr_dx in self.signed(xr):
             np.add.at(g, vid, r[:, None] * dr_dx)
             rows.append(r)
         return np.concatenate(rows) if rows else np.zeros(0), g
 
-    def _signed(self, xr):
+    def signed(self, xr):
         """Per curve: (its vertex ids (n,), signed distances (n,) px, their gradients with
         respect to those posed vertices (n, 3))."""
         for name, poly in self.curves.items():

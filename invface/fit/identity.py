@@ -106,7 +106,7 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
         xr = pose_points(x + d, rotation, translation)
         rows, g, blocks = [np.zeros(0)], np.zeros((V, 3)), []
         for obj, w in objs:
-            for vid, r, dr_dx in obj._signed(xr):
+            for vid, r, dr_dx in obj.signed(xr):
                 r, a = np.sqrt(w) * r, np.sqrt(w) * dr_dx @ R       # the correction is posed with the head
                 np.add.at(g, vid, r[:, None] * a)
                 rows.append(r)
