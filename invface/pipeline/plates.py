@@ -351,7 +351,7 @@ def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), sta
     plate path (see ``render.plates.load_plate``); detector: see ``find_curves``; temporal: the
     weight of the temporal term to the ``starts`` (``fit.curves.fit_curves``; px^2 per
     scale unit^2, scaled here with the face like lambda_1); temporal_shading: the shading
-    stages' share of it (``fit.fit_plate``). A kind whose simulation cannot reach an
+    stages' share of it (``fit.plate.fit_plate``). A kind whose simulation cannot reach an
     equilibrium is recorded in ``FrameFit.failed`` and the other kinds go on. Returns a
     FrameFit."""
     from ..fit.curves import check_curves
