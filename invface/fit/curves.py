@@ -30,7 +30,7 @@ from ..mesh.sections import resample_even as resample
 from ..model.controls import FitVector
 from .dogleg import dogleg
 from .lambdas import EQ15_LAMBDA_1, EQ15_TRACK_LAMBDA
-from .pose import pose_points, posed_jacobian, posed_surface, regulariser
+from .pose import pose_points, posed_jacobian, posed_surface, prior_rows, regulariser, temporal_prior
 
 PLATE_CURVES = ("lip_outer_upper", "lip_outer_lower", "lip_inner_upper", "lip_inner_lower",
                 "eye_L_upper", "eye_L_lower", "eye_R_upper", "eye_R_lower")
@@ -189,9 +189,9 @@ class CurveObjective:
         reg, Jreg = regulariser(z, self.vec, self.lam)
         rows, jac = rows + [reg], jac + [Jreg]
         if self.prior is not None:
-            c, w = self.prior
-            rows.append(w * (np.asarray(z, float) - c))
-            jac.append(np.diag(w))
+            rp, Jp = prior_rows(z, self.prior)
+            rows.append(rp)
+            jac.append(Jp)
         return np.concatenate(rows), np.vstack(jac)
 
     def rows(self, xr, Jall):
@@ -285,9 +285,7 @@ def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=N
         history.extend(dict(h, **{"pass": name}) for h in res.history)
         return res
 
-    prior = None
-    if previous is not None and temporal > 0:
-        prior = (np.asarray(previous, float), np.sqrt(temporal) / vec.scales())
+    prior = temporal_prior(vec, previous, temporal)
     tracked = None
     if solve_pose:
         _, rot, tr = vec.unpack(z)

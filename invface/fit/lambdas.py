@@ -8,8 +8,9 @@ Eq. 16 (shading):    |E_2|^2 + EQ16_LAMBDA_1 |E_1|^2 + EQ16_LAMBDA_2 |w - w^|^2 
 sequence frames:     Eq. 15 + TEMPORAL_LAMBDA |(z - z_prev) / scales|^2                (px^2)
                      Eq. 16 + EQ16_TEMPORAL TEMPORAL_LAMBDA |(z - z_prev) / scales|^2  (linear light)
 
-The plate weights are the paper's for its plates, except EQ16_LAMBDA_1 (below). Eq. 15's residuals are pixels and Eq. 14's
-data term sums over the face's pixels, so both grow with the face's area in the image:
+The plate weights are the paper's for its plates, except EQ16_LAMBDA_1 (below). Eq. 15's
+residuals are pixels and Eq. 14's data term sums over the face's pixels, so both grow with
+the face's area in the image:
 ``face_scale`` gives (d / SAMPLE_EYE_PX)^2 for a face d px between the outer eye corners,
 224 px on the sample plates, where the paper's values were checked.
 """

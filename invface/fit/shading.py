@@ -51,7 +51,7 @@ from ..render.backplate import background_plate, head_silhouette
 from ..render.renderer import FaceRenderer
 from .curves import CurveObjective
 from .lambdas import EQ16_LAMBDA_1, EQ16_LAMBDA_2
-from .pose import posed_jacobian, posed_surface
+from .pose import posed_jacobian, posed_surface, prior_rows, regulariser, temporal_prior
 
 LEVELS = 3
 #: Huber threshold of the image rows (linear light, per pyramid sample and channel): about 10x
@@ -156,9 +156,7 @@ class ShadingObjective:
                                      seed=seed, backplate=plate if backplate is None else backplate, crop=window)
         self.p_hat, self.lam1, self.lam2 = np.asarray(p_hat, float), lam1, lam2
         self.jacobian_spp = int(jacobian_spp)
-        # the temporal rows sqrt(lambda_t) (z - z_prev) / s, or none
-        self.previous = None if previous is None or temporal <= 0 else np.asarray(previous, float)
-        self.temporal_row = None if self.previous is None else np.sqrt(temporal) / self.vec.scales()
+        self.temporal = temporal_prior(self.vec, previous, temporal)     # a sequence's, or None
         self.robust = None if not robust else float(robust)
         self.curves = CurveObjective(model, surface_model, camera, curves, 0.0) if curves else None
         self.terms = {}
@@ -168,13 +166,11 @@ class ShadingObjective:
     def _prior_rows(self, z):
         """The prior's K+6 rows, then the temporal term's z-size rows in a sequence: (rows,
         their Jacobian (n, z size)); both are linear in z."""
-        vec = self.vec
-        rows = [np.sqrt(self.lam2) * (z[vec.controls] - self.p_hat)]
-        jac = [np.sqrt(self.lam2) * np.eye(vec.P, vec.size)]
-        if self.previous is not None:
-            rows.append(self.temporal_row * (z - self.previous))
-            jac.append(np.diag(self.temporal_row))
-        return np.concatenate(rows), np.vstack(jac)
+        rows, jac = regulariser(z, self.vec, self.lam2, self.p_hat)
+        if self.temporal is None:
+            return rows, jac
+        rt, Jt = prior_rows(z, self.temporal)
+        return np.concatenate([rows, rt]), np.vstack([jac, Jt])
 
     def _prior_and_curves(self, z, xr, Jall=None):
         """Residual rows of the prior, temporal and curve terms at z (posed surface xr), scaled
@@ -195,10 +191,10 @@ class ShadingObjective:
         """Eq. 16's value from the image rows and the prior, temporal and curve rows
         (``_prior_and_curves``); ``terms`` keeps its parts."""
         P = self.vec.P
-        T = P if self.previous is None else P + self.vec.size
+        T = P if self.temporal is None else P + self.vec.size
         part = lambda r: 0.5 * float(r @ r)
         self.terms = {"image": part(r_image), "prior": part(r_rest[:P]), "curves": part(r_rest[T:])}
-        if self.previous is not None:
+        if self.temporal is not None:
             self.terms["temporal"] = part(r_rest[P:T])
         return sum(self.terms.values())
 
@@ -361,9 +357,10 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     backward pass per evaluation, for parameter counts where K+12 forward passes are too
     many); max_iter: iterations of either; ftol: the dogleg stops after a step that lowers
     the cost by less than this fraction; previous (z size,) and temporal (linear light^2 per
-    ``FitVector.scales()`` unit^2): a sequence's previous frame and the temporal term's weight. ``render`` options go to ``ShadingObjective`` (spp,
-    silhouette_spp, seed, jacobian_spp, backplate: default the plate with the head filled in
-    from its surroundings). Returns a ShadingFit."""
+    ``FitVector.scales()`` unit^2): a sequence's previous frame and the temporal term's
+    weight. ``render`` options go to ``ShadingObjective`` (spp, silhouette_spp, seed,
+    jacobian_spp, backplate: default the plate with the head filled in from its
+    surroundings). Returns a ShadingFit."""
     from .dogleg import dogleg
     sm, vec = model.surface_model(kind), FitVector.of(model)
     z0 = vec.pack(p_hat if p0 is None else p0, rotation, translation)
