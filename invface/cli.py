@@ -135,7 +135,8 @@ def cmd_simulate(args):
         print(f"wrote {args.output}")
     if args.preview:
         from .report.expressions import write_pose_preview
-        print(f"wrote {write_pose_preview(model, result.surface, args.preview)}")
+        w = None if jaw is None else {"jaw": jaw}
+        print(f"wrote {write_pose_preview(model, result.surface, args.preview, w=w)}")
     return 0
 
 

@@ -181,14 +181,17 @@ scalp in every render; with the pull, none. It fades the extension to the gauge'
 
 def calibrate(model_triangles, x, plate_image, camera, rotation=None, translation=None,
               lam=EQ14_LAMBDA, albedo_mean=SKIN_ALBEDO, mask=None, max_iter=30, tol=1e-7,
-              gamma0=None, albedo0=None, samples=3, progress=None):
+              gamma0=None, albedo0=None, samples=3, progress=None, parts=None, parts_x=None):
     """Solve Eq. 14 for gamma (9,3) and albedo (V,3) on one plate.
 
     model_triangles (F,3); x (V,3) m: the neutral surface; plate_image (H,W,3) linear;
     camera: the plate's (undistorted) Camera; rotation (3,) rad / translation (3,) m: the
     rigid head pose; lam: lambda of Eq. 14; albedo_mean (3,): the gauge; mask (H, W): plate
     pixels to use; samples: rays per pixel side in the coverage operator; progress: called
-    with each iteration's log entry. Returns a Calibration with the iteration log."""
+    with each iteration's log entry; parts, parts_x: the model's ``InnerParts`` and their
+    unposed positions (P,3) m (default at rest): pixels where an eye or the mouth shows are
+    left out of the data term (their albedo is the parts' own, not solved for). Returns a
+    Calibration with the iteration log."""
     img = np.asarray(plate_image, np.float64)
     if img.shape[:2] != (camera.height, camera.width):
         raise ImageError(f"plate is {img.shape[1]}x{img.shape[0]} px, camera is "
@@ -199,7 +202,7 @@ def calibrate(model_triangles, x, plate_image, camera, rotation=None, translatio
     V = len(x)
     rot = np.zeros(3) if rotation is None else np.asarray(rotation, float)
     tr = np.zeros(3) if translation is None else np.asarray(translation, float)
-    renderer = FaceRenderer(model_triangles, camera, spp=8, silhouette_spp=0.5)
+    renderer = FaceRenderer(model_triangles, camera, spp=8, silhouette_spp=0.5, parts=parts)
     L = mesh_laplacian(model_triangles, V)
     LtL = (L.T @ L).tocsr()
     ref = np.broadcast_to(np.asarray(albedo_mean, float), 3)
@@ -207,7 +210,7 @@ def calibrate(model_triangles, x, plate_image, camera, rotation=None, translatio
     c = np.tile(ref, (V, 1)) if albedo0 is None else np.array(albedo0, float)
     history = []
     t0 = time.perf_counter()
-    pixels, W = renderer.coverage(x, rot, tr, samples=samples)
+    pixels, W = renderer.coverage(x, rot, tr, samples=samples, parts_x=parts_x)
     if mask is not None:
         keep = np.asarray(mask, bool).reshape(-1)[pixels]
         pixels, W = pixels[keep], W[keep]
@@ -250,11 +253,12 @@ def calibrate(model_triangles, x, plate_image, camera, rotation=None, translatio
                        lam=float(lam), history=history)
 
 
-def comparison_image(model_triangles, x, calibration, plate_image, spp=16):
-    """(H, 3W, 3) linear image: plate | render with the calibration | |difference| x 4."""
+def comparison_image(model_triangles, x, calibration, plate_image, spp=16, parts=None, parts_x=None):
+    """(H, 3W, 3) linear image: plate | render with the calibration | |difference| x 4.
+    parts, parts_x: the inner parts and their unposed positions, as in ``calibrate``."""
     cal = calibration
-    r = FaceRenderer(model_triangles, cal.camera, spp=spp)
-    img = r.image(x, cal.gamma, cal.albedo, cal.rotation, cal.translation)
+    r = FaceRenderer(model_triangles, cal.camera, spp=spp, parts=parts)
+    img = r.image(x, cal.gamma, cal.albedo, cal.rotation, cal.translation, parts_x=parts_x)
     a = img[..., 3:4]
     render = img[..., :3] + (1 - a) * plate_image         # the face over the plate
     diff = np.clip(4 * np.abs(render - plate_image), 0, 1)

@@ -31,7 +31,7 @@ from ..errors import ImageError, InvfaceError, SimulationError
 from ..model.controls import FitVector
 from .curves import CurveObjective, fit_curves, projection_jacobian, rms_px
 from .lambdas import EQ15_LAMBDA_1, EQ16_TEMPORAL
-from .pose import posed_surface, unpose_points
+from .pose import posed_parts, posed_surface, unpose_points
 from .results import NamedControls, write_fit_files
 from .shading import fit_shading
 
@@ -146,8 +146,8 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     _, xr = posed_surface(sm, vec.pack(p, rot, tr), vec)
     from ..measure.volume import lip_volume_change
     from ..render.renderer import FaceRenderer
-    render = FaceRenderer(model.triangles, cam, spp=spp, backplate=plate.image).image(
-        xr, calibration.gamma, calibration.albedo)[..., :3]
+    render = FaceRenderer(model.triangles, cam, spp=spp, backplate=plate.image, parts=model.parts).image(
+        xr, calibration.gamma, calibration.albedo, parts_x=posed_parts(model, vec.pack(p, rot, tr), vec))[..., :3]
     inside = slice(None) if plate.mask is None else np.asarray(plate.mask, bool)
     residual = {k: np.linalg.norm(v, axis=1)
                 for k, v in CurveObjective(model, sm, cam, curves, 0.0).residuals(xr).items()}

@@ -29,6 +29,13 @@ def posed_surface(surface_model, z, vec):
     return x, pose_points(x, rot, tr)
 
 
+def posed_parts(model, z, vec):
+    """The inner parts' posed positions (P,3) m at z (jaw and head pose), or None."""
+    p, rot, tr = vec.unpack(z)
+    x = model.parts_positions(p)
+    return None if x is None else pose_points(x, rot, tr)
+
+
 def posed_jacobian(surface_model, z, vec):
     """(x_R (V,3), d x_R / dz (vec.size, V, 3)) at z."""
     p, th, _ = vec.unpack(z)

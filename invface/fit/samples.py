@@ -57,7 +57,8 @@ def write_sample_plates(model, folder, names=None, size=(720, 540), noise=0.005,
             progress(f"plate {name} ({kind} model)")
         p = model.parameters({"weights": weights, "jaw": np.zeros(6) if jaw is None else jaw})
         x = model.surface_model(kind).surface(p)
-        image, _ = render_plate(model, x, cam, gamma, albedo, rot, tr, noise=noise, seed=i)
+        image, _ = render_plate(model, x, cam, gamma, albedo, rot, tr, noise=noise, seed=i,
+                                parts_x=model.parts_positions(p))
         path = write_image(folder / f"{name}.png", image)
         cam.save(folder / f"{name}.json")
         truth = {"kind": kind, "weights": weights, "jaw": p[vec.jaw].tolist(), "rotation": list(rot),
@@ -124,7 +125,8 @@ def write_sample_clip(model, folder, n=24, kind="blendshape", size=(320, 240), f
             progress(f"clip frame {i + 1}/{n}")
         p = model.parameters({"weights": weights, "jaw": jaw})
         x = sm.surface(p)
-        image, _ = render_plate(model, x, cam, gamma, albedo, rot, tr, noise=noise, seed=i)
+        image, _ = render_plate(model, x, cam, gamma, albedo, rot, tr, noise=noise, seed=i,
+                                parts_x=model.parts_positions(p))
         xr = pose_points(x, rot, tr)
         curves = {c: projection_jacobian(cam, xr[model.curves[c]])[0] for c in PLATE_CURVES}
         curves = {c: v + rng.normal(0, curve_noise, v.shape) for c, v in curves.items()}

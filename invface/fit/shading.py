@@ -51,7 +51,7 @@ from ..render.backplate import background_plate, head_silhouette
 from ..render.renderer import FaceRenderer
 from .curves import CurveObjective
 from .lambdas import EQ16_LAMBDA_1, EQ16_LAMBDA_2
-from .pose import posed_jacobian, posed_surface, prior_rows, regulariser, temporal_prior
+from .pose import posed_jacobian, posed_parts, posed_surface, prior_rows, regulariser, temporal_prior
 
 LEVELS = 3
 #: Huber threshold of the image rows (linear light, per pyramid sample and channel): about 10x
@@ -153,7 +153,8 @@ class ShadingObjective:
         self.target = self.G(self.plate * self.mask)
         self.gamma, self.albedo = np.asarray(gamma, float), np.asarray(albedo, float)
         self.renderer = FaceRenderer(model.triangles, camera, spp=spp, silhouette_spp=silhouette_spp,
-                                     seed=seed, backplate=plate if backplate is None else backplate, crop=window)
+                                     seed=seed, backplate=plate if backplate is None else backplate, crop=window,
+                                     parts=model.parts)
         self.p_hat, self.lam1, self.lam2 = np.asarray(p_hat, float), lam1, lam2
         self.jacobian_spp = int(jacobian_spp)
         self.temporal = temporal_prior(self.vec, previous, temporal)     # a sequence's, or None
@@ -198,13 +199,14 @@ class ShadingObjective:
             self.terms["temporal"] = part(r_rest[P:T])
         return sum(self.terms.values())
 
-    def _render(self, xr):
-        """Render the posed surface (V, 3) with gradients on: (Dr.Jit positions, image,
-        image residual r = G M (F - F*) (m,))."""
+    def _render(self, xr, parts_x=None):
+        """Render the posed surface (V, 3) (and the posed inner parts (P, 3), which carry no
+        gradient) with gradients on: (Dr.Jit positions, image, image residual
+        r = G M (F - F*) (m,))."""
         mi = self.renderer.mi
         x = mi.Float(xr.astype(np.float32).ravel())
         self.dr.enable_grad(x)
-        img = self.renderer.render(x, self.gamma, self.albedo)
+        img = self.renderer.render(x, self.gamma, self.albedo, parts_x=parts_x)
         rgb = np.array(img, np.float32)[..., :3]
         return x, img, self.G(rgb * self.mask) - self.target
 
@@ -233,7 +235,7 @@ class ShadingObjective:
         dr.enable_grad(zd)
         xr = self.bridge(zd, exact=z)
         xr_np = self.bridge.last
-        img = self.renderer.render(xr, self.gamma, self.albedo)
+        img = self.renderer.render(xr, self.gamma, self.albedo, parts_x=posed_parts(self.model, z, self.vec))
         r = self.G(np.array(img, np.float32)[..., :3] * self.mask) - self.target
         psi, dpsi = huber_rows(r, self.robust)
         prior, Jp = self._prior_rows(z)
@@ -258,7 +260,8 @@ class ShadingObjective:
         included), each sent through G M."""
         from .dogleg import NormalEquations
         _, xr = posed_surface(self.sm, z, self.vec)
-        x, img, r = self._render(xr)
+        parts_x = posed_parts(self.model, z, self.vec)
+        x, img, r = self._render(xr, parts_x)
         rr, _ = self._prior_and_curves(z, xr)
         psi, dpsi = huber_rows(r, self.robust)
         cost = self._cost(psi, rr)
@@ -268,7 +271,7 @@ class ShadingObjective:
             # backward first: the renderer's adjoint pass reads the scene's current vertex
             # positions, which the Jacobian's render replaces
             g = self._backward(x, img, psi * dpsi, Jall)
-            C = self.image_jacobian(xr2, Jall)
+            C = self.image_jacobian(xr2, Jall, parts_x=parts_x)
             if self.robust is not None:
                 C *= dpsi[None, :].astype(np.float32)
             rr2, Jr = self._prior_and_curves(z, xr2, Jall)
@@ -276,17 +279,18 @@ class ShadingObjective:
 
         return NormalEquations(cost, derivatives=derivatives)
 
-    def image_jacobian(self, xr, Jall, spp=None):
+    def image_jacobian(self, xr, Jall, spp=None, parts_x=None):
         """J^T of the image residual r = G M (F - F*): (z size, m) float32, one row per
         parameter, each a forward-mode pass through one render of the posed surface xr
-        (V, 3) at ``spp`` (default ``jacobian_spp``) samples per pixel, seeded as the
-        objective's renders, along d xr / dz_k = Jall[k] (V, 3)."""
+        (V, 3) (the inner parts at parts_x (P, 3), fixed) at ``spp`` (default
+        ``jacobian_spp``) samples per pixel, seeded as the objective's renders, along
+        d xr / dz_k = Jall[k] (V, 3)."""
         dr, mi = self.dr, self.renderer.mi
         C = np.empty((len(Jall), len(self.target)), np.float32)
         with _forward_mode(dr):
             x = mi.Float(xr.astype(np.float32).ravel())
             dr.enable_grad(x)
-            img = self.renderer.render(x, self.gamma, self.albedo, spp=spp or self.jacobian_spp)
+            img = self.renderer.render(x, self.gamma, self.albedo, spp=spp or self.jacobian_spp, parts_x=parts_x)
             for k in range(len(Jall)):
                 dr.set_grad(x, mi.Float(Jall[k].astype(np.float32).ravel()))
                 dr.enqueue(dr.ADMode.Forward, x)

@@ -51,6 +51,8 @@ def save_bundle(model, path):
         "muscles": [{"name": x.name, "side": x.side} for x in m.muscles],
         "meta": m.meta,
     }
+    if m.parts is not None:
+        header["parts"] = list(m.parts.names)
     arrays = dict(
         header=np.array(json.dumps(header)),
         neutral=m.neutral, triangles=m.triangles,
@@ -74,6 +76,10 @@ def save_bundle(model, path):
         arrays["track_displacements"] = m.track_displacements
     if m.scan_transform is not None:
         arrays["scan_transform"] = np.asarray(m.scan_transform, np.float64)
+    if m.parts is not None:
+        arrays.update(parts_vertices=m.parts.vertices, parts_triangles=m.parts.triangles,
+                      parts_albedo=m.parts.albedo, parts_jaw_weights=m.parts.jaw_weights,
+                      parts_offsets=m.parts.offsets)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     try:
@@ -209,6 +215,7 @@ def load_bundle(path):
         acts = r.get("blendshape_activations", "f", (K, M), optional=True)
         track = r.get("track_displacements", "f", (K, N, 3), optional=True)
         scan_tf = r.get("scan_transform", "f", (4, 4), optional=True)
+        parts = _read_parts(r, header)
         meta = dict(header.get("meta", {}))
         try:
             skin_embedding_method(meta)
@@ -225,5 +232,25 @@ def load_bundle(path):
             cranium_mesh=(cverts, r.ids("cranium_triangles", len(cverts), (None, 3))),
             jaw_mesh=(jverts, r.ids("jaw_triangles", len(jverts), (None, 3))),
             blendshape_activations=acts, track_displacements=track, scan_transform=scan_tf,
-            meta=meta,
+            parts=parts, meta=meta,
         )
+
+
+def _read_parts(r, header):
+    """The optional inner parts (eyes, teeth, mouth), or None for a bundle without them."""
+    from .parts import InnerParts
+    if "parts_vertices" not in r.data:
+        return None
+    names = header.get("parts")
+    if not isinstance(names, list):
+        r.fail("header", "lacks the list 'parts' that names the parts' meshes")
+    pv = r.get("parts_vertices", "f", (None, 3))
+    P = len(pv)
+    parts = InnerParts(pv, r.ids("parts_triangles", P, (None, 3)), r.get("parts_albedo", "f", (P, 3)),
+                       r.get("parts_jaw_weights", "f", (P,)), [str(n) for n in names],
+                       r.get("parts_offsets", "i", (len(names) + 1,)))
+    try:
+        parts.validate()
+    except ValueError as e:
+        r.fail("parts_vertices", str(e).removeprefix("parts: "))
+    return parts

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..errors import InvfaceError
 from .controls import Controls
+from .parts import InnerParts
 from .rig import BlendshapeRig, jaw_transform, skin
 
 
@@ -88,6 +89,7 @@ class FaceModel:
     blendshape_activations: np.ndarray = None   # (K, M) activations that made each shape
     track_displacements: np.ndarray = None      # (K,N,3) Poisson dX_k (paper 000 Eq. 11)
     scan_transform: np.ndarray = None           # (4,4) input scan frame -> model frame (morphed models)
+    parts: InnerParts = None                    # eyes, teeth, tongue, mouth lining (rendered, rigid)
     meta: dict = field(default_factory=dict)
     _surface_models: dict = field(default_factory=dict, repr=False, compare=False)
     _embedding: object = field(default=None, repr=False, compare=False)
@@ -117,6 +119,19 @@ class FaceModel:
     def jaw_matrix(self, jaw) -> np.ndarray:
         """4x4 jaw transform for jaw parameters (6,)."""
         return jaw_transform(jaw, self.jaw_pivot, self.jaw_frame)
+
+    def parts_positions(self, w=None):
+        """Positions (P,3) m of the inner parts (``parts``) before the head pose, for controls
+        w (Controls, dict, or a parameter vector p (K+6,)): the upper teeth and eyes stay with
+        the cranium, the lower teeth and tongue follow the jaw. None without parts."""
+        if self.parts is None:
+            return None
+        K = len(self.blendshape_names)
+        if isinstance(w, np.ndarray) and w.shape == (K + 6,):
+            jaw = w[K:]
+        else:
+            jaw = Controls.coerce(w, self.blendshape_names).jaw
+        return self.parts.posed(self.jaw_matrix(jaw))
 
     def surface(self, w=None, kind="blendshape") -> np.ndarray:
         """Surface vertex positions x(w) (V,3) in metres, before the rigid head pose.

@@ -79,6 +79,8 @@ def carry_anatomy(template, positions, progress=None):
     cranium = (carry_points(X0, X1, tets, template.cranium_mesh[0]), template.cranium_mesh[1])
     jaw = (carry_points(X0, X1, tets, template.jaw_mesh[0]), template.jaw_mesh[1])
     pivot = carry_points(X0, X1, tets, template.jaw_pivot)[0]
+    parts = (None if template.parts is None
+             else template.parts.with_vertices(carry_points(X0, X1, tets, template.parts.vertices)))
     et, ew = locate_near(X1, tets, positions, template.embed_tets)   # each skin vertex stays on its side of the lips
     model = FaceModel(
         neutral=positions, triangles=template.triangles, blendshape_names=[],
@@ -87,7 +89,7 @@ def carry_anatomy(template, positions, progress=None):
         fixed_cranium=template.fixed_cranium, fixed_jaw=template.fixed_jaw,
         embed_tets=et, embed_weights=ew, volume_jaw_weights=template.volume_jaw_weights,
         muscles=muscles, landmarks=dict(template.landmarks), curves=dict(template.curves),
-        cranium_mesh=cranium, jaw_mesh=jaw, meta={"skin_embedding": dict(MLS)},   # smooth across the tets' faces
+        cranium_mesh=cranium, jaw_mesh=jaw, parts=parts, meta={"skin_embedding": dict(MLS)},   # smooth across the tets' faces
     )
     W = model.embedding_matrix()
     say(f"skin embedded: moving least squares over {W.nnz / W.shape[0]:.1f} tet vertices per skin vertex")

@@ -142,6 +142,8 @@ class PlateCalibration:
     triangles: np.ndarray
     seconds: float
     pose: PoseEstimate | None = None
+    parts: object = None            # the model's InnerParts and their unposed positions (P,3)
+    parts_x: np.ndarray | None = None
 
     @property
     def gamma(self):
@@ -164,7 +166,8 @@ class PlateCalibration:
         path.parent.mkdir(parents=True, exist_ok=True)
         self.calibration.save(path)
         compare = write_image(path.with_name(path.stem + "_compare.png"),
-                              comparison_image(self.triangles, self.shape, self.calibration, self.plate.image))
+                              comparison_image(self.triangles, self.shape, self.calibration, self.plate.image,
+                                               parts=self.parts, parts_x=self.parts_x))
         return path, compare
 
     def describe(self):
@@ -210,10 +213,12 @@ def calibrate_plate(model, plate, rotation=None, translation=None, shape=None, l
     check_plate(plate.image, plate.path)
     t0 = time.perf_counter()
     shape = model.neutral if shape is None else np.asarray(shape, float)
+    parts_x = model.parts_positions(None if pose is None else pose.p)
     cal = calibrate(model.triangles, shape, plate.image, plate.camera, rotation, translation, lam=lam,
-                    mask=plate.mask, max_iter=max_iter, progress=progress)
+                    mask=plate.mask, max_iter=max_iter, progress=progress, parts=model.parts, parts_x=parts_x)
     cal.plate = plate.path
-    return PlateCalibration(cal, shape, plate, np.asarray(model.triangles), time.perf_counter() - t0, pose)
+    return PlateCalibration(cal, shape, plate, np.asarray(model.triangles), time.perf_counter() - t0, pose,
+                            model.parts, parts_x)
 
 
 def auto_calibrate(model, plate, curves, source="given", lam_curves=None, lam=None, max_iter=30, progress=None):

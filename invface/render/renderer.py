@@ -61,10 +61,14 @@ class FaceRenderer:
     so that silhouette derivatives see the plate's background rather than black: rays that
     miss the face look the plate up (bilinearly) at their own pixel position.
     crop: (x0, y0, width, height) px: render only that window of the camera's image (the
-    returned images are that size; the pixels keep the full image's rays)."""
+    returned images are that size; the pixels keep the full image's rays).
+    parts: the model's ``InnerParts`` (eyes, teeth, tongue, mouth lining) or None: a second
+    mesh with its own fixed albedo under the same light and pose, placed by each call's
+    ``parts_x`` (default: at rest). It carries no gradient: the image's derivatives reach the
+    skin (its silhouettes against the parts included) but not the parts' positions."""
 
     def __init__(self, triangles, camera: Camera, spp=8, silhouette_spp=0.5, seed=0, backplate=None,
-                 crop=None):
+                 crop=None, parts=None):
         if spp < 1:
             raise ConfigError(f"spp must be >= 1, got {spp}")
         if silhouette_spp < 0:
@@ -85,9 +89,24 @@ class FaceRenderer:
         self.faces = mi.UInt(tri.ravel())
         scene = {"type": "scene", "integrator": {"type": NAME, "sppi": 0},
                  "sensor": camera.sensor_dict(spp=self.spp, sampler="multijitter", crop=crop), "face": mesh}
+        keep = ["face.vertex_positions", f"face.{ATTRIBUTE}"]
+        self.parts = parts
+        if parts is not None:
+            P = len(parts.vertices)
+            pm = mi.Mesh("parts", P, len(parts.triangles), has_vertex_normals=False)
+            pp = mi.traverse(pm)
+            pp["faces"] = mi.UInt(np.ascontiguousarray(parts.triangles, np.uint32).ravel())
+            pp["vertex_positions"] = mi.Float(np.asarray(parts.vertices, np.float32).ravel())
+            pp.update()
+            pm.add_attribute(ATTRIBUTE, 3, dr.zeros(mi.Float, 3 * P))
+            self.parts_faces = mi.UInt(np.ascontiguousarray(parts.triangles, np.uint32).ravel())
+            self.parts_albedo = mi.Float(np.asarray(parts.albedo, np.float32).ravel())
+            scene["parts"] = pm
+            keep += ["parts.vertex_positions", f"parts.{ATTRIBUTE}"]
         self.scene = mi.load_dict(scene)
+        self.face_shape = self.scene.shapes()[[s.id() for s in self.scene.shapes()].index("face")]
         self.params = mi.traverse(self.scene)
-        self.params.keep(["face.vertex_positions", f"face.{ATTRIBUTE}"])
+        self.params.keep(keep)
         self.sensor = self.scene.sensors()[0]
         self.integrator = self.scene.integrator()
         if backplate is not None:
@@ -116,26 +135,47 @@ class FaceRenderer:
             raise ConfigError(f"{name}: expected {n} values, got {self.dr.width(a)}")
         return a
 
+    def _pose(self, x, rotation, translation):
+        if rotation is None and translation is None:
+            return x
+        rot = self._as_float(np.zeros(3) if rotation is None else rotation, 3, "rotation")
+        tr = self._as_float(np.zeros(3) if translation is None else translation, 3, "translation")
+        return pose_dr(x, rot, tr)
+
     def vertex_radiance(self, x, gamma, albedo, rotation=None, translation=None):
         """Posed positions (3V,) and per-vertex radiance (3V,) as Dr.Jit Floats."""
         V = self.vertex_count
-        x = self._as_float(x, 3 * V, "vertex positions")
-        if rotation is not None or translation is not None:
-            rot = self._as_float(np.zeros(3) if rotation is None else rotation, 3, "rotation")
-            tr = self._as_float(np.zeros(3) if translation is None else translation, 3, "translation")
-            x = pose_dr(x, rot, tr)
+        x = self._pose(self._as_float(x, 3 * V, "vertex positions"), rotation, translation)
         gamma = self._as_float(gamma, 27, "SH lighting gamma (9x3)")
         albedo = self._as_float(albedo, 3 * V, "albedo")
         return x, vertex_radiance_dr(x, self.faces, gamma, albedo)
 
-    def render(self, x, gamma, albedo, rotation=None, translation=None, seed=None, spp=None):
+    def _place_parts(self, parts_x, gamma, rotation, translation):
+        """Put the parts at ``parts_x`` (P,3) m (None: at rest), posed and lit like the skin."""
+        if self.parts is None:
+            return
+        dr = self.dr
+        with dr.suspend_grad():
+            P = len(self.parts.vertices)
+            px = self.parts.vertices if parts_x is None else parts_x
+            px = self._pose(self._as_float(np.asarray(px, np.float32), 3 * P, "parts' positions"),
+                            None if rotation is None else dr.detach(self._as_float(rotation, 3, "rotation")),
+                            None if translation is None else dr.detach(self._as_float(translation, 3, "translation")))
+            gamma = dr.detach(self._as_float(gamma, 27, "SH lighting gamma (9x3)"))
+            self.params["parts.vertex_positions"] = px
+            self.params[f"parts.{ATTRIBUTE}"] = vertex_radiance_dr(px, self.parts_faces, gamma, self.parts_albedo)
+
+    def render(self, x, gamma, albedo, rotation=None, translation=None, seed=None, spp=None, parts_x=None):
         """TensorXf (H, W, 4): linear RGB + alpha, attached to every Dr.Jit input with grad.
 
         x: vertex positions (3V,) or (V,3) m; gamma: (9,3) or (27,); albedo (V,3) or (3V,);
-        rotation (3,) rad Euler XYZ and translation (3,) m: the rigid head pose."""
+        rotation (3,) rad Euler XYZ and translation (3,) m: the rigid head pose; parts_x
+        (P,3) m: the inner parts' positions in x's frame (``FaceModel.parts_positions``;
+        default at rest), posed like x."""
         xr, rad = self.vertex_radiance(x, gamma, albedo, rotation, translation)
         self.params["face.vertex_positions"] = xr
         self.params[f"face.{ATTRIBUTE}"] = rad
+        self._place_parts(parts_x, gamma, rotation, translation)
         self.params.update()
         mi, dr = self.mi, self.dr
         seed = dr.opaque(mi.UInt32, self.seed if seed is None else int(seed))
@@ -144,19 +184,21 @@ class FaceRenderer:
         return self.integrator.render_attached(self.scene, self.sensor, seed,
                                                self.spp if spp is None else int(spp), edges)
 
-    def coverage(self, x, rotation=None, translation=None, samples=3):
+    def coverage(self, x, rotation=None, translation=None, samples=3, parts_x=None):
         """The linear image operator of the current geometry: image = W @ vertex radiance.
 
         Casts ``samples`` x ``samples`` rays per pixel (fixed stratified positions) through
         the posed mesh with Mitsuba and interpolates barycentrically, as the renderer does.
         Returns (pixels (M,) flat indices row*W+col of the pixels whose every ray hits the
-        face, W scipy CSR (M, V) of barycentric weights / samples^2)."""
+        face's skin first (not the background, not an eye or the mouth behind it), W scipy
+        CSR (M, V) of barycentric weights / samples^2)."""
         import scipy.sparse as sp
         mi, dr = self.mi, self.dr
         with dr.suspend_grad():
             xr = self.vertex_radiance(np.asarray(x, np.float32), np.zeros(27),
                                       np.zeros((self.vertex_count, 3)), rotation, translation)[0]
             self.params["face.vertex_positions"] = xr
+            self._place_parts(parts_x, np.zeros(27), rotation, translation)
             self.params.update()
             w, h = self.camera.size
             k = int(samples)
@@ -167,7 +209,7 @@ class FaceRenderer:
             ray, _ = self.sensor.sample_ray(0.0, 0.0, mi.Point2f(sx.astype(np.float32), sy.astype(np.float32)),
                                             mi.Point2f(0.5))
             pi = self.scene.ray_intersect_preliminary(ray, coherent=True)
-            valid = np.array(pi.is_valid(), bool)
+            valid = np.array(pi.is_valid() & (pi.shape == mi.ShapePtr(self.face_shape)), bool)
             prim = np.array(pi.prim_index, np.int64)
             uv = np.array(pi.prim_uv, np.float64).T
         full = valid.reshape(-1, k * k).all(1)
@@ -207,12 +249,12 @@ class FaceRenderer:
         out.write_text(text)
         return out
 
-    def image(self, x, gamma, albedo, rotation=None, translation=None, seed=None, spp=None):
+    def image(self, x, gamma, albedo, rotation=None, translation=None, seed=None, spp=None, parts_x=None):
         """numpy (H, W, 4) float32 render (no gradients)."""
         with self.dr.suspend_grad():
             img = self.render(np.asarray(x, np.float32), np.asarray(gamma, np.float32),
                               np.asarray(albedo, np.float32),
                               None if rotation is None else np.asarray(rotation, np.float32),
                               None if translation is None else np.asarray(translation, np.float32),
-                              seed=seed, spp=spp)
+                              seed=seed, spp=spp, parts_x=parts_x)
         return np.array(img, dtype=np.float32)

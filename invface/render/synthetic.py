@@ -41,11 +41,12 @@ def skin_albedo(model, seed=0):
 
 
 def render_plate(model, x, camera: Camera, gamma, albedo, rotation=None, translation=None,
-                 background=(0.18, 0.2, 0.22), noise=0.005, spp=64, seed=0):
+                 background=(0.18, 0.2, 0.22), noise=0.005, spp=64, seed=0, parts_x=None):
     """A linear plate (H, W, 3): the surface x (V, 3) rendered over a flat background, with
-    Gaussian noise of std ``noise``; and its face mask (H, W) bool."""
-    r = FaceRenderer(model.triangles, camera, spp=spp, seed=seed)
-    img = r.image(x, gamma, albedo, rotation, translation)
+    Gaussian noise of std ``noise``; and its face mask (H, W) bool. The model's inner parts
+    (eyes, teeth, mouth) are drawn at parts_x (``model.parts_positions``; default at rest)."""
+    r = FaceRenderer(model.triangles, camera, spp=spp, seed=seed, parts=model.parts)
+    img = r.image(x, gamma, albedo, rotation, translation, parts_x=parts_x)
     a = img[..., 3:4]
     plate = img[..., :3] + (1 - a) * np.asarray(background, np.float32)
     plate = plate + np.random.default_rng(seed).normal(0, noise, plate.shape).astype(np.float32)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..render.preview import look_at_camera, render_meshes, to_srgb8
-from .preview import SKIN, VIEWS
+from .preview import SKIN, VIEWS, parts_meshes
 
 
 def blendshape_pose(model, name):
@@ -16,11 +16,13 @@ def blendshape_pose(model, name):
     return {"weights": {name: 1.0}, "jaw": jaw}
 
 
-def view_tiles(model, x, size=256, spp=8):
-    """Renders (one per VIEWS entry, front then 3/4) of surface positions x (V,3), sRGB uint8."""
+def view_tiles(model, x, size=256, spp=8, w=None):
+    """Renders (one per VIEWS entry, front then 3/4) of surface positions x (V,3), sRGB uint8,
+    with the inner parts (eyes, teeth, mouth) at controls w."""
     cams = [look_at_camera(np.array(eye), (0.0, 0.0, 0.06), fov=19, width=size, height=size, spp=spp)
             for eye in VIEWS.values()]
-    return [to_srgb8(render_meshes([(x, model.triangles, SKIN)], cam)) for cam in cams]
+    meshes = [(x, model.triangles, SKIN)] + parts_meshes(model, w)
+    return [to_srgb8(render_meshes(meshes, cam)) for cam in cams]
 
 
 def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None, kind="blendshape"):
@@ -40,9 +42,10 @@ def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None, 
     for i, name in enumerate(names):
         if progress:
             progress(f"render {name}")
-        x = model.neutral if name == "neutral" else model.surface(blendshape_pose(model, name), kind=kind)
+        w = None if name == "neutral" else blendshape_pose(model, name)
+        x = model.neutral if w is None else model.surface(w, kind=kind)
         ax = np.ravel(axes)[i]
-        ax.imshow(np.concatenate(view_tiles(model, x, size, spp), 1))
+        ax.imshow(np.concatenate(view_tiles(model, x, size, spp, w), 1))
         ax.set_title(name, fontsize=9)
     fig.tight_layout()
     path = Path(path)
@@ -54,13 +57,14 @@ def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None, 
     return path
 
 
-def write_pose_preview(model, x, path, size=400, spp=16):
-    """One PNG: the neutral (top) and the posed skin x (V, 3) m (bottom), front and 3/4,
-    written through a temporary file; returns the path."""
+def write_pose_preview(model, x, path, size=400, spp=16, w=None):
+    """One PNG: the neutral (top) and the posed skin x (V, 3) m at controls w (bottom),
+    front and 3/4, written through a temporary file; returns the path."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    img = np.concatenate([np.concatenate(view_tiles(model, v, size, spp), 1) for v in (model.neutral, x)], 0)
+    img = np.concatenate([np.concatenate(view_tiles(model, v, size, spp, c), 1)
+                          for v, c in ((model.neutral, None), (x, w))], 0)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + ".tmp.png")

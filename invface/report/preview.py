@@ -32,6 +32,16 @@ def _muscle_meshes(model):
     return out
 
 
+def parts_meshes(model, w=None):
+    """The inner parts (eyes, teeth, tongue, mouth lining) at controls w as preview meshes
+    (V, F, per-vertex colours), brightened like the preview's skin; [] without parts."""
+    if model.parts is None:
+        return []
+    from ..render.shading import SKIN_ALBEDO
+    gain = np.mean(np.asarray(SKIN) / SKIN_ALBEDO)
+    return [(model.parts_positions(w), model.parts.triangles, np.clip(model.parts.albedo * gain, 0, 1))]
+
+
 def _half(V, F, keep_left):
     """Triangles of the actor's left (x > 0) or right half."""
     cx = V[F].mean(1)[:, 0]
@@ -50,15 +60,16 @@ def scenes(model, jaw_open=0.25):
     for m in model.muscles:
         in_muscle[m.tets] = True
     tet_ids = np.nonzero(X[T].mean(1)[:, 0] < 0.0)[0][owner]
-    open_x = model.surface({"jaw": [jaw_open, 0, 0, 0, 0, 0]})
+    opened = {"jaw": [jaw_open, 0, 0, 0, 0, 0]}
+    open_x = model.surface(opened)
     return {
-        "skin": [(V, F, SKIN)],
+        "skin": [(V, F, SKIN)] + parts_meshes(model),
         "skin_muscles": [(V, _half(V, F, False), SKIN)] + _muscle_meshes(model),
         "bone": bone,
         "tets_cutaway": [(X, cut_faces[~cut_is_plane], SKIN),
                          (X, cut_faces[cut_is_plane & ~in_muscle[tet_ids]], (0.95, 0.85, 0.8)),
                          (X, cut_faces[cut_is_plane & in_muscle[tet_ids]], (0.85, 0.25, 0.2))],
-        "jaw_open": [(open_x, F, SKIN)],
+        "jaw_open": [(open_x, F, SKIN)] + parts_meshes(model, opened),
     }
 
 

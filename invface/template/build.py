@@ -14,11 +14,12 @@ from ..model.facemodel import FaceModel
 from . import grid
 from .features import find_features
 from .muscles import build_muscles
+from .parts import template_parts
 from .shape import JAW_PIVOT, MOUTH_Y, tissue_depth
 from .shell import embed_fine, layer_radii, orient, prism_tets
 from .surfaces import build_grids
 
-GENERATOR_VERSION = "1"
+GENERATOR_VERSION = "2"     # 2: the inner parts (eyes, teeth, tongue, mouth lining)
 # Quality bounds every generated mesh must meet (checked at build time and in the tests).
 MIN_DIHEDRAL_DEG = 1.0
 MIN_RADIUS_RATIO = 0.005
@@ -122,6 +123,7 @@ def generate(resolution=1.0, progress=None, expressions=True):
         embed_tets=etet, embed_weights=ew, volume_jaw_weights=vw, muscles=muscles,
         landmarks=landmarks, curves=curves,
         cranium_mesh=submesh(tri_region == 0), jaw_mesh=submesh(tri_region == 1),
+        parts=template_parts(bone),
         meta={"generator": "invface.template", "generator_version": GENERATOR_VERSION,
               "resolution": float(resolution), "layers": n_layers, "grid": [n_alpha, n_beta],
               "render_subdivision": factor, "build_seconds": round(time.perf_counter() - t0, 2),
