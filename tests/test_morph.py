@@ -64,6 +64,11 @@ def test_round_trip(actors, small_expressive_model):
         assert np.abs(model.rest_positions - tpl.rest_positions).max() > 0.003
         emb = model.embedded_surface(model.rest_positions)
         assert np.abs(emb - model.neutral).max() < 2e-3
+        # the eyes and teeth came along as rigid pieces, hidden behind the closed lids and lips
+        eye, eye0 = (mm.parts.vertices[mm.parts.part("eye_L")] for mm in (model, tpl))
+        r, r0 = (np.linalg.norm(e - e.mean(0), axis=1) for e in (eye, eye0))
+        assert np.ptp(r) < 1e-9 and abs(r.mean() / r0.mean() - 1) < 0.1
+        assert _parts_in_front_of_the_skin(model) < 20
 
 
 def test_smile_simulates_on_morphed_model(actors):
@@ -120,6 +125,17 @@ def test_partial_scan_is_completed_from_the_template(small_expressive_model):
     on[used] = True
     assert err[on].mean() < 6.0 and err[~on].mean() < 12.0, (err[on].mean(), err[~on].mean())
     assert res.stats["quality"]["inverted"] == 0
+
+
+def _parts_in_front_of_the_skin(model):
+    """Pixels of a front view at rest where an inner part pokes through the skin (seen where
+    the skin alone would be)."""
+    from invface.render.camera import Camera
+    from invface.render.renderer import FaceRenderer
+    cam = Camera.front_view(160, 120, fov_deg=40, eye=(0.0, 0.0, 0.5), target=(0.0, 0.0, 0.1))
+    skin = FaceRenderer(model.triangles, cam, spp=4).coverage(model.neutral)[0]
+    both = FaceRenderer(model.triangles, cam, spp=4, parts=model.parts).coverage(model.neutral)[0]
+    return len(np.setdiff1d(skin, both))
 
 
 def test_real_scan_ict_neutral(small_model, tmp_path):

@@ -35,7 +35,7 @@ from .openings import ACROSS, MAX_INNER_FRACTION, inner_surfaces, map_openings, 
 from .orient import align_to_template
 from .surface import SurfacePoisson, morph_surface
 from .target import Target, clean, drop_faces
-from .volume import carry_fibers, carry_points, inside_fraction, morph_volume
+from .volume import carry_fibers, carry_points, carry_similar, inside_fraction, morph_volume
 
 EXPRESSIONS = ("simulate", "copy", "none")
 
@@ -79,8 +79,10 @@ def carry_anatomy(template, positions, progress=None):
     cranium = (carry_points(X0, X1, tets, template.cranium_mesh[0]), template.cranium_mesh[1])
     jaw = (carry_points(X0, X1, tets, template.jaw_mesh[0]), template.jaw_mesh[1])
     pivot = carry_points(X0, X1, tets, template.jaw_pivot)[0]
-    parts = (None if template.parts is None
-             else template.parts.with_vertices(carry_points(X0, X1, tets, template.parts.vertices)))
+    parts = template.parts
+    if parts is not None:    # each part as one rigid piece, scaled with the flesh around it
+        parts = parts.with_vertices(np.concatenate([carry_similar(X0, X1, parts.vertices[parts.part(n)])
+                                                    for n in parts.names]))
     et, ew = locate_near(X1, tets, positions, template.embed_tets)   # each skin vertex stays on its side of the lips
     model = FaceModel(
         neutral=positions, triangles=template.triangles, blendshape_names=[],

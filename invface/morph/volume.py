@@ -119,6 +119,29 @@ def carry_points(X0, X1, tets, points):
     return np.einsum("pk,pkj->pj", w, X1[tets[t]])
 
 
+def carry_similar(X0, X1, points, radius=0.02):
+    """Points (P,3) of one rigid part (an eyeball, a dental arch) moved by the similarity
+    (rotation, uniform scale, translation) that best maps the flesh around them, X0 -> X1
+    (N,3), weighted by a Gaussian of each flesh point's distance to the part (points farther
+    than ``radius`` m are left out). Keeps the part's shape, where the volume map's tets
+    extrapolated into the head's inside would shear it."""
+    from scipy.spatial import cKDTree
+    points = np.asarray(points, float).reshape(-1, 3)
+    d, _ = cKDTree(points).query(X0, distance_upper_bound=radius)
+    near = np.isfinite(d)
+    if near.sum() < 4:
+        return points.copy()
+    w = np.exp(-(d[near] / (0.5 * radius)) ** 2)
+    A, B = X0[near], X1[near]
+    ma, mb = w @ A / w.sum(), w @ B / w.sum()
+    a, b = A - ma, B - mb
+    U, S, Vt = np.linalg.svd((w[:, None] * b).T @ a)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    R = U @ D @ Vt
+    s = np.trace(np.diag(S) @ D) / float(w @ np.sum(a * a, axis=1))
+    return (points - ma) @ (s * R).T + mb
+
+
 def carry_fibers(X0, X1, tets, tet_ids, fibers):
     """Unit fibres (n,3) of tets ``tet_ids`` pushed forward by each tet's deformation gradient."""
     g, _ = shape_gradients(X0, tets[tet_ids])
