@@ -1,5 +1,6 @@
 """The model builder (paper 001): morph the template onto new faces, robustness, import."""
 import numpy as np
+from scipy.spatial.distance import pdist
 import pytest
 import trimesh
 from scipy.spatial import cKDTree
@@ -65,9 +66,9 @@ def test_round_trip(actors, small_expressive_model):
         emb = model.embedded_surface(model.rest_positions)
         assert np.abs(emb - model.neutral).max() < 2e-3
         # the eyes and teeth came along as rigid pieces, hidden behind the closed lids and lips
-        eye, eye0 = (mm.parts.vertices[mm.parts.part("eye_L")] for mm in (model, tpl))
-        r, r0 = (np.linalg.norm(e - e.mean(0), axis=1) for e in (eye, eye0))
-        assert np.ptp(r) < 1e-9 and abs(r.mean() / r0.mean() - 1) < 0.1
+        eye, eye0 = (mm.parts.vertices[mm.parts.part("eye_L")][::9] for mm in (model, tpl))
+        scale = pdist(eye) / pdist(eye0)
+        assert np.ptp(scale) < 1e-9 and abs(scale[0] - 1) < 0.1
         assert _parts_in_front_of_the_skin(model) < 20
 
 
