@@ -115,3 +115,13 @@ def test_covered_from_front_on_a_sphere():
     hidden = covered_from_front(s.vertices, s.faces)
     nz = s.face_normals[:, 2]
     assert hidden[nz < -0.02].all() and not hidden[nz > 0.02].any()
+
+
+def test_radius_ratio_of_a_collapsed_tet_is_zero():
+    """Two coincident corners made 0/0 in the circumradius: 3.8e281 once, which passed the
+    morph's quality bound and broke the skin embedding's solves (a builder test)."""
+    from invface.mesh.tets import radius_ratio
+    X = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 0, 0]]) * 0.01
+    X[4] = X[1] + 1e-19
+    rr = radius_ratio(X, np.array([[0, 1, 2, 3], [0, 1, 2, 4]]))
+    assert 0.5 < rr[0] <= 1.0 and rr[1] == 0.0

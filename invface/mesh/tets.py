@@ -47,7 +47,9 @@ def radius_ratio(X, tets):
     num = (np.sum(d1 * d1, 1)[:, None] * np.cross(d2, d3) + np.sum(d2 * d2, 1)[:, None] * np.cross(d3, d1)
            + np.sum(d3 * d3, 1)[:, None] * np.cross(d1, d2))
     r_c = np.linalg.norm(num, axis=1) / np.maximum(np.abs(2 * vol6), 1e-300)
-    return 3.0 * r_in / np.maximum(r_c, 1e-300)
+    rr = 3.0 * r_in / np.maximum(r_c, 1e-300)
+    # it is at most 1; above (0/0 when two corners coincide: 3.8e281 once) the tet is degenerate
+    return np.where(rr <= 1.0 + 1e-9, rr, 0.0)
 
 
 def quality_summary(X, tets):
