@@ -118,10 +118,13 @@ def test_covered_from_front_on_a_sphere():
 
 
 def test_radius_ratio_of_a_collapsed_tet_is_zero():
-    """Two coincident corners made 0/0 in the circumradius: 3.8e281 once, which passed the
-    morph's quality bound and broke the skin embedding's solves (a builder test)."""
+    """Two corners (nearly) coincident made 0/0 in the circumradius: 3.8e281 once, which passed
+    the morph's quality bound and broke the skin embedding's solves (a builder test)."""
     from invface.mesh.tets import radius_ratio
-    X = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 0, 0]]) * 0.01
-    X[4] = X[1] + 1e-19
-    rr = radius_ratio(X, np.array([[0, 1, 2, 3], [0, 1, 2, 4]]))
-    assert 0.5 < rr[0] <= 1.0 and rr[1] == 0.0
+    rng = np.random.default_rng(0)
+    base = np.array([[0.0749, 0.0536, -0.0027], [0.0750, 0.0481, -0.0007], [0.0741, 0.0471, -0.0011]])
+    X = np.concatenate([base, base[1] + rng.normal(0, 1, (200, 3)) * 10.0 ** rng.uniform(-19, -12, (200, 1))])
+    tets = np.stack([np.zeros(200, int), np.ones(200, int), np.full(200, 2), 3 + np.arange(200)], 1)
+    rr = radius_ratio(X, tets)
+    assert np.all((rr >= 0) & (rr < 1e-3))
+    assert radius_ratio(np.eye(4)[:, :3] * 0.01 + [[0, 0, 0]] * 4, np.array([[3, 0, 1, 2]]))[0] > 0.5
