@@ -252,5 +252,5 @@ def _read_parts(r, header):
     try:
         parts.validate()
     except ValueError as e:
-        r.fail("parts_vertices", str(e).removeprefix("parts: "))
+        r.fail("parts_vertices", str(e))
     return parts

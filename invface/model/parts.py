@@ -42,21 +42,21 @@ class InnerParts:
         return InnerParts(np.asarray(vertices, float), self.triangles, self.albedo, self.jaw_weights,
                           list(self.names), self.offsets)
 
-    def validate(self, source="parts"):
+    def validate(self):
         """Raise ValueError naming the bad field."""
         P = len(self.vertices)
         if self.vertices.ndim != 2 or self.vertices.shape[1] != 3 or not np.all(np.isfinite(self.vertices)):
-            raise ValueError(f"{source}: vertices are not (P,3) finite")
+            raise ValueError("vertices are not (P,3) finite")
         if self.triangles.ndim != 2 or self.triangles.shape[1] != 3 or (
                 len(self.triangles) and (self.triangles.min() < 0 or self.triangles.max() >= P)):
-            raise ValueError(f"{source}: triangles are not (F,3) indices below {P}")
+            raise ValueError(f"triangles are not (F,3) indices below {P}")
         if self.albedo.shape != (P, 3) or not np.all((self.albedo >= 0) & (self.albedo <= 1)):
-            raise ValueError(f"{source}: albedo is not (P,3) in [0, 1]")
+            raise ValueError("albedo is not (P,3) in [0, 1]")
         if self.jaw_weights.shape != (P,) or not np.all((self.jaw_weights >= 0) & (self.jaw_weights <= 1)):
-            raise ValueError(f"{source}: jaw weights are not (P,) in [0, 1]")
+            raise ValueError("jaw weights are not (P,) in [0, 1]")
         if len(self.offsets) != len(self.names) + 1 or self.offsets[0] != 0 or self.offsets[-1] != P \
                 or np.any(np.diff(self.offsets) < 0):
-            raise ValueError(f"{source}: offsets do not split the {P} vertices into {len(self.names)} parts")
+            raise ValueError(f"offsets do not split the {P} vertices into {len(self.names)} parts")
 
 
 def concatenate(parts):

@@ -95,11 +95,11 @@ class FaceRenderer:
             P = len(parts.vertices)
             pm = mi.Mesh("parts", P, len(parts.triangles), has_vertex_normals=False)
             pp = mi.traverse(pm)
-            pp["faces"] = mi.UInt(np.ascontiguousarray(parts.triangles, np.uint32).ravel())
+            self.parts_faces = mi.UInt(np.ascontiguousarray(parts.triangles, np.uint32).ravel())
+            pp["faces"] = self.parts_faces
             pp["vertex_positions"] = mi.Float(np.asarray(parts.vertices, np.float32).ravel())
             pp.update()
             pm.add_attribute(ATTRIBUTE, 3, dr.zeros(mi.Float, 3 * P))
-            self.parts_faces = mi.UInt(np.ascontiguousarray(parts.triangles, np.uint32).ravel())
             self.parts_albedo = mi.Float(np.asarray(parts.albedo, np.float32).ravel())
             scene["parts"] = pm
             keep += ["parts.vertex_positions", f"parts.{ATTRIBUTE}"]

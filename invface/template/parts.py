@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.parts import InnerParts, concatenate
+from ..model.parts import concatenate
 from .shape import EYE_CENTER, EYE_RADIUS, MOUTH_Y
 
 MM = 1e-3
@@ -57,7 +57,7 @@ def orient_away(V, F, inner):
     return F
 
 
-def _sphere(centre, radii, thetas, n_phi, axis_z=True):
+def _sphere(centre, radii, thetas, n_phi):
     """Vertices of an ellipsoid by polar rings around +Z: rings at polar angles ``thetas``
     (ending poles 0 and pi included), n_phi points each; returns (V, F, theta per vertex)."""
     th = np.asarray(thetas, float)
@@ -166,18 +166,14 @@ def mouth_parts(z_front, y_occlusal, tilt=np.tan(np.radians(10))):
     V, F, _ = _sphere(centre, (17 * MM, 8 * MM, 20 * MM), th, 28)
     depth = np.clip((z_front - V[:, 2]) / (25 * MM), 0, None)
     out.append(("tongue", V, F, np.array(TONGUE) * (0.25 + 0.75 * np.exp(-depth))[:, None], 1.0))
-    # the lining: an ellipsoid around teeth and tongue, its front cap (ahead of the teeth's
-    # lingual faces, within the lips' height) removed, facing inwards
+    # the lining: an ellipsoid around teeth and tongue without its front cap (62 degrees
+    # around +Z, the mouth's opening), facing inwards
     centre = np.array([0.0, y_occlusal - 2 * MM + 30 * MM * tilt, z_front - 32 * MM])
     radii = np.array([31 * MM, 22 * MM, 35 * MM])
     V, F, th = _sphere(centre, radii, np.linspace(0, np.pi, 24), 40)
     cut = th < np.radians(62)
-    keep = ~cut[F].any(1)
-    used = np.unique(F[keep])
-    remap = np.full(len(V), -1)
-    remap[used] = np.arange(len(used))
-    V, F = V[used], remap[F[keep]]
-    F = F[:, [0, 2, 1]]                                               # normals into the cavity
+    used, inv = np.unique(F[~cut[F].any(1)], return_inverse=True)
+    V, F = V[used], inv.reshape(-1, 3)[:, [0, 2, 1]]                  # normals into the cavity
     depth = np.clip((z_front - V[:, 2]) / (20 * MM), 0, None)
     occl = y_occlusal + (z_front - V[:, 2]) * tilt
     w = np.clip((occl + 2 * MM - V[:, 1]) / (8 * MM) + 0.5, 0, 1)
@@ -198,5 +194,3 @@ def template_parts(bone_vertices):
     parts += mouth_parts(z_front, MOUTH_Y - 1 * MM)
     return concatenate(parts)
 
-
-__all__ = ["InnerParts", "template_parts", "eyeball", "teeth", "mouth_parts"]
