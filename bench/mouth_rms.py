@@ -1,0 +1,34 @@
+"""Image RMS of a plate fit in the mouth (inside the outer lip curves) and in its opening
+(inside the inner lip curves), and over the face mask, from fit-plate run folders.
+
+    python bench/mouth_rms.py RUN_DIR [RUN_DIR ...]     # reads RUN_DIR/{blendshape,simulation}/fit.npz
+"""
+import sys
+import cv2
+import numpy as np
+
+
+def masks(z):
+    names = list(z["curve_names"])
+    c = {n: z[f"curve_{i}"] for i, n in enumerate(names)}
+    out = {}
+    for region, (up, lo) in {"mouth": ("lip_outer_upper", "lip_outer_lower"),
+                             "opening": ("lip_inner_upper", "lip_inner_lower")}.items():
+        poly = np.concatenate([c[up], c[lo][::-1]])
+        m = np.zeros(z["plate"].shape[:2], np.uint8)
+        cv2.fillPoly(m, [np.round(poly * 4).astype(np.int32)], 1, cv2.LINE_AA, shift=2)
+        out[region] = m.astype(bool)
+    return out
+
+
+for folder in sys.argv[1:]:
+    for kind in ("blendshape", "simulation"):
+        try:
+            z = np.load(f"{folder}/{kind}/fit.npz")
+        except FileNotFoundError:
+            continue
+        d = z["render"] - z["plate"]
+        row = {k: (float(np.sqrt(np.mean(d[m] ** 2))), int(m.sum())) for k, m in masks(z).items()}
+        face = z["mask"].astype(bool) if "mask" in z.files else np.ones(d.shape[:2], bool)
+        row["face"] = (float(np.sqrt(np.mean(d[face] ** 2))), int(face.sum()))
+        print(folder, kind, " ".join(f"{k} {v[0]:.4f} ({v[1]} px)" for k, v in row.items()))
