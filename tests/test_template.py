@@ -136,3 +136,48 @@ def test_resolution_scales_the_tet_count():
         na, nb, layers, _ = sizes(r)
         t[r] = 6 * (na - 1) * (nb - 1) * layers
     assert t[10.0] > 300_000 and 8 < t[10.0] / t[1.0] < 12
+
+
+# Rhine & Moore's table (template.shape.DEPTH_SITES), the sites issue 29 names
+TABLE_SITES = ("glabella", "nasion", "rhinion", "mid_philtrum", "labrale_superius", "labrale_inferius",
+               "mental_eminence", "gonion", "zygion", "mid_masseter", "frontal_eminence")
+
+
+def test_skin_lies_over_the_skull_at_the_forensic_tissue_depths(default_model):
+    """Skin-to-bone distance (the lips' to the incisors, as the table measures them) at the
+    craniometric sites is within 30 % of the published mean depth, on both sides."""
+    from invface.template.shape import DEPTH_SITES, depth_site_points
+    from invface.template.skull import tissue_depths
+
+    m = default_model
+    bone = [m.cranium_mesh, m.jaw_mesh, m.parts.mesh("upper_teeth"), m.parts.mesh("lower_teeth")]
+    pts = depth_site_points()
+    P = np.array([pts[n] for n in TABLE_SITES])
+    table = np.array([DEPTH_SITES[n][3] for n in TABLE_SITES])
+    for mirror in (1, -1):
+        d = tissue_depths(P * [mirror, 1, 1], bone)
+        err = d / table - 1
+        assert np.all(np.abs(err) < 0.30), dict(zip(TABLE_SITES, np.round(err, 2)))
+
+
+def test_skull_has_orbits_aperture_and_a_mandible_with_condyles(default_model):
+    """Rays through the orbits' and the nasal aperture's middle pass the skull's front; the
+    mandible reaches up to the condyles at the jaw hinge and down to the chin."""
+    from invface.template.shape import CONDYLE_X, EYE_CENTER, JAW_PIVOT
+    from invface.template.skull import cranium_field, mandible_field
+
+    # the orbit is open along the eye's axis from in front of the eyeball back to 20 mm behind
+    # its front, the aperture 20 mm deep behind the nose
+    z = np.linspace(EYE_CENTER[2] - 0.008, EYE_CENTER[2] + 0.02, 30)
+    orbit = np.stack([np.full_like(z, EYE_CENTER[0]), np.full_like(z, EYE_CENTER[1]), z], 1)
+    assert np.all(cranium_field(orbit) > 0)
+    nose = np.stack([np.zeros_like(z), np.full_like(z, 0.0), z + 0.012], 1)
+    assert np.all(cranium_field(nose) > 0)
+    # bone above and below the aperture: the nasal bones and the maxilla
+    assert cranium_field(np.array([[0.0, 0.025, 0.105]]))[0] < 0
+    # the condyles at the hinge, bone-free between them (the U of the mandible is open)
+    cond = np.array([[CONDYLE_X, JAW_PIVOT[1], JAW_PIVOT[2]], [-CONDYLE_X, JAW_PIVOT[1], JAW_PIVOT[2]]])
+    assert np.all(mandible_field(cond) < 0)
+    assert mandible_field(np.array([[0.0, -0.06, 0.03]]))[0] > 0
+    Vj = default_model.jaw_mesh[0]
+    assert Vj[:, 1].max() > JAW_PIVOT[1] and np.ptp(Vj[:, 0]) > 2 * CONDYLE_X

@@ -37,6 +37,12 @@ class InnerParts:
         i = list(self.names).index(name)
         return slice(int(self.offsets[i]), int(self.offsets[i + 1]))
 
+    def mesh(self, name):
+        """(vertices (n,3), triangles (f,3)) of part ``name`` alone, at rest."""
+        sl = self.part(name)
+        T = self.triangles[(self.triangles >= sl.start).all(1) & (self.triangles < sl.stop).all(1)]
+        return self.vertices[sl], T - sl.start
+
     def with_vertices(self, vertices) -> "InnerParts":
         """The same parts with other rest positions (P,3) (a morphed actor's)."""
         return InnerParts(np.asarray(vertices, float), self.triangles, self.albedo, self.jaw_weights,

@@ -35,7 +35,7 @@ from .openings import ACROSS, MAX_INNER_FRACTION, inner_surfaces, map_openings, 
 from .orient import align_to_template
 from .surface import SurfacePoisson, morph_surface
 from .target import Target, clean, drop_faces
-from .volume import carry_fibers, carry_points, carry_similar, inside_fraction, morph_volume
+from .volume import carry_bone, carry_fibers, carry_points, carry_similar, inside_fraction, morph_volume
 
 EXPRESSIONS = ("simulate", "copy", "none")
 
@@ -76,8 +76,8 @@ def carry_anatomy(template, positions, progress=None):
     X0, X1, tets = template.rest_positions, vm.X, template.tets
     muscles = [replace(m, fibers=carry_fibers(X0, X1, tets, m.tets, m.fibers),
                        centerline=carry_points(X0, X1, tets, m.centerline)) for m in template.muscles]
-    cranium = (carry_points(X0, X1, tets, template.cranium_mesh[0]), template.cranium_mesh[1])
-    jaw = (carry_points(X0, X1, tets, template.jaw_mesh[0]), template.jaw_mesh[1])
+    cranium = (carry_bone(X0, X1, tets, template.cranium_mesh[0]), template.cranium_mesh[1])
+    jaw = (carry_bone(X0, X1, tets, template.jaw_mesh[0]), template.jaw_mesh[1])
     pivot = carry_points(X0, X1, tets, template.jaw_pivot)[0]
     parts = template.parts
     if parts is not None:    # each part as one rigid piece, scaled with the flesh around it

@@ -142,6 +142,23 @@ def carry_similar(X0, X1, points, radius=0.02):
     return (points - ma) @ (s * R).T + mb
 
 
+def carry_bone(X0, X1, tets, points, near=0.003, far=0.015):
+    """Bone surface points (P,3) moved with the flesh X0 -> X1 (N,3): those within ``near`` m
+    of a flesh vertex by the tet map (carry_points) with the flesh they hold, those beyond
+    ``far`` (the back of the cranium, the ramus, far outside the face's flesh, where the tets'
+    map extrapolated would shear them) by the similarity of the flesh (carry_similar),
+    blended linearly in between."""
+    from scipy.spatial import cKDTree
+    points = np.asarray(points, float).reshape(-1, 3)
+    d, _ = cKDTree(X0).query(points)
+    w = np.clip((far - d) / (far - near), 0.0, 1.0)[:, None]
+    out = carry_similar(X0, X1, points, radius=far) * (1 - w)
+    if np.any(w > 0):
+        inside = w[:, 0] > 0
+        out[inside] += w[inside] * carry_points(X0, X1, tets, points[inside])
+    return out
+
+
 def carry_fibers(X0, X1, tets, tet_ids, fibers):
     """Unit fibres (n,3) of tets ``tet_ids`` pushed forward by each tet's deformation gradient."""
     g, _ = shape_gradients(X0, tets[tet_ids])

@@ -165,6 +165,34 @@ def _pairs(points, normals, Q, tri, radius, facing, exclude=None):
     return i[keep], f[keep]
 
 
+BONE_PAIRS_PER_VERTEX = 4     # a fine skull mesh (2 mm triangles) would pair ~25 per vertex
+
+
+def _nearest_per_point(points, centroids, i, f, k):
+    """Of the pairs (point ids i, triangle ids f), the k per point with the nearest centroid."""
+    d = np.linalg.norm(points[i] - centroids[f], axis=1)
+    order = np.lexsort((d, i))
+    i, f = i[order], f[order]
+    first = np.searchsorted(i, i)                   # the group's first index, i being sorted
+    keep = np.arange(len(i)) - first < k
+    return i[keep], f[keep]
+
+
+def _bone_meshes(model):
+    """[((V (n,3), F (f,3)), moves with the jaw?)]: the cranium with the upper teeth and the
+    mandible with the lower teeth (where the model has inner parts), each as one mesh."""
+    out = []
+    for mesh, teeth, moves in ((model.cranium_mesh, "upper_teeth", False), (model.jaw_mesh, "lower_teeth", True)):
+        pieces = [] if mesh is None or len(mesh[0]) == 0 else [(np.asarray(mesh[0], float), np.asarray(mesh[1], np.int64))]
+        if model.parts is not None and teeth in model.parts.names:
+            pieces.append(model.parts.mesh(teeth))
+        if pieces:
+            off = np.cumsum([0] + [len(v) for v, _ in pieces[:-1]])
+            out.append(((np.concatenate([v for v, _ in pieces]),
+                         np.concatenate([f + o for (_, f), o in zip(pieces, off)])), moves))
+    return out
+
+
 class Collisions:
     """Contact model of a FaceModel's flesh: lips/lids self-contact and flesh against bone.
 
@@ -173,10 +201,11 @@ class Collisions:
 
     Contacts are fixed at set-up: ``v`` (c,) free boundary vertices, ``tri`` (c,3) triangles
     as ids into the point array Q = (flesh vertices (N), cranium mesh vertices, jaw mesh
-    vertices) (``points``), the jaw's moved rigidly by the jaw transform. A flesh vertex is
+    vertices, each with its teeth) (``points``), the jaw's moved rigidly by the jaw transform. A flesh vertex is
     paired with every free boundary triangle whose centroid is within ``radius`` at rest, that
     faces it (normals opposed), has it on its outer side and shares no tet with it (the other
-    lip or lid), and with every bone triangle within ``radius`` facing it.
+    lip or lid), and with the BONE_PAIRS_PER_VERTEX nearest bone (or teeth) triangles within
+    ``radius`` facing it.
     """
 
     def __init__(self, model, free_mask, stiffness, radius=0.004):
@@ -197,14 +226,12 @@ class Collisions:
 
         # flesh on bone
         self.bone_vertices, offset, self.jaw_range, self.jaw_rest = [], N, (N, N), np.zeros((0, 3))
-        for mesh, moves in ((model.cranium_mesh, False), (model.jaw_mesh, True)):
-            if mesh is None or len(mesh[0]) == 0:
-                continue
-            V, T = np.asarray(mesh[0], float), np.asarray(mesh[1], np.int64)
+        for (V, T), moves in _bone_meshes(model):
             i, f = _pairs(X0[cand], nrm[cand], V, T, radius, 1.0)        # any orientation first
             if len(i) and np.median(np.einsum("ci,ci->c", face_normals(V, T[f]), X0[cand[i]] - V[T[f, 0]])) < 0:
                 T = T[:, ::-1]                                          # normals towards the flesh
-            i, f = _pairs(X0[cand], nrm[cand], V, T, radius, 0.0)
+            i, f = _pairs(X0[cand], nrm[cand], V, T, radius, -0.5)
+            i, f = _nearest_per_point(X0[cand], V[T].mean(1), i, f, BONE_PAIRS_PER_VERTEX)
             vs.append(cand[i])
             tris.append(T[f] + offset)
             self.bone_vertices.append(V)

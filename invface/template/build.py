@@ -16,10 +16,11 @@ from .features import find_features
 from .muscles import build_muscles
 from .parts import template_parts
 from .shape import JAW_PIVOT, MOUTH_Y, tissue_depth
+from .skull import skull_meshes
 from .shell import embed_fine, layer_radii, orient, prism_tets
 from .surfaces import build_grids
 
-GENERATOR_VERSION = "2"     # 2: the inner parts (eyes, teeth, tongue, mouth lining)
+GENERATOR_VERSION = "3"     # 2: the inner parts (eyes, teeth, tongue, mouth lining); 3: the skull
 # Quality bounds every generated mesh must meet (checked at build time and in the tests).
 MIN_DIHEDRAL_DEG = 1.0
 MIN_RADIUS_RATIO = 0.005
@@ -44,19 +45,15 @@ def sizes(resolution):
 
 
 def _regions(P):
-    """Classify inner-surface points P (n,3).
-
-    Returns region (0 cranium, 1 jaw, 2 free: lip and cheek mucosa and the band along the
-    occlusal line where the mouth opens) and bone (0 cranium, 1 jaw: the bone or teeth behind
-    the point, for the bone meshes).
-    """
+    """Classify inner-surface points P (n,3): 0 cranium, 1 jaw, 2 free (lip and cheek mucosa
+    and the band along the occlusal line where the mouth opens)."""
     x, y, z = P[:, 0], P[:, 1], P[:, 2]
     # below the occlusal plane (mouth line tilted up towards the condyles) moves with the jaw
     occl = MOUTH_Y + (0.113 - z) * (JAW_PIVOT[1] - MOUTH_Y) / (0.113 - JAW_PIVOT[2])
     jaw = (y < occl) & (y > -0.105) & (z > -0.005)
     lips = ((x / 0.056) ** 2 + ((y - MOUTH_Y) / 0.017) ** 2 < 1) & (z > 0.02)
     band = (np.abs(y - occl) < 0.007) & (z > 0.0)
-    return np.where(lips | band, 2, np.where(jaw, 1, 0)), jaw.astype(int)
+    return np.where(lips | band, 2, np.where(jaw, 1, 0))
 
 
 def generate(resolution=1.0, progress=None, expressions=True):
@@ -83,7 +80,7 @@ def generate(resolution=1.0, progress=None, expressions=True):
         raise MeshError(f"generated flesh mesh fails the quality bounds: {q}")
 
     inner = np.arange(n_layers * Ns, (n_layers + 1) * Ns)
-    region, bone_side = _regions(X[inner])
+    region = _regions(X[inner])
     fixed_cranium = inner[region == 0]
     fixed_jaw = inner[region == 1]
 
@@ -104,16 +101,13 @@ def generate(resolution=1.0, progress=None, expressions=True):
     say("landmarks and curves")
     landmarks, curves = find_features(fine, Vf)
 
-    # bone surfaces: the inner layer, pushed 1 mm behind the free mucosa (teeth/gums)
-    bone = X[inner].copy()
-    d = bone - grid.CENTER
-    bone -= np.where(region == 2, 0.001, 0.0)[:, None] * d / np.linalg.norm(d, axis=1, keepdims=True)
-    tri_region = np.round(np.mean(bone_side[coarse.triangles], axis=1)).astype(int)
-
-    def submesh(mask):
-        tri = coarse.triangles[mask]
-        used, inv = np.unique(tri, return_inverse=True)
-        return bone[used], inv.reshape(-1, 3).astype(np.int64)
+    say("skull and mandible (marching cubes)")
+    cranium_mesh, jaw_mesh = skull_meshes()
+    # the inner parts: the incisors go 1.5 mm behind the free mucosa, which lies 1 mm in front
+    # of the inner layer's surface there
+    mucosa = X[inner].copy()
+    d = mucosa - grid.CENTER
+    mucosa -= np.where(region == 2, 0.001, 0.0)[:, None] * d / np.linalg.norm(d, axis=1, keepdims=True)
 
     model = FaceModel(
         neutral=Vf, triangles=fine.triangles.astype(np.int64), blendshape_names=[],
@@ -122,8 +116,7 @@ def generate(resolution=1.0, progress=None, expressions=True):
         fixed_cranium=fixed_cranium.astype(np.int64), fixed_jaw=fixed_jaw.astype(np.int64),
         embed_tets=etet, embed_weights=ew, volume_jaw_weights=vw, muscles=muscles,
         landmarks=landmarks, curves=curves,
-        cranium_mesh=submesh(tri_region == 0), jaw_mesh=submesh(tri_region == 1),
-        parts=template_parts(bone),
+        cranium_mesh=cranium_mesh, jaw_mesh=jaw_mesh, parts=template_parts(mucosa),
         meta={"generator": "invface.template", "generator_version": GENERATOR_VERSION,
               "resolution": float(resolution), "layers": n_layers, "grid": [n_alpha, n_beta],
               "render_subdivision": factor, "build_seconds": round(time.perf_counter() - t0, 2),

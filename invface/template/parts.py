@@ -127,7 +127,8 @@ def teeth(z_front, y_occlusal, tilt, half_width=27 * MM, depth=45 * MM, upper=Tr
     t = (7.0 + 3.0 * f) * MM                                           # crown thickness
     # profile (inward offset, height above the biting edge, is tooth) from the labial gum
     # over the crown to the lingual gum
-    prof = [(-0.6 * MM, h + 4 * MM, 0), (0, h + 0.5 * MM, 0), (0, h, 1), (0, 0.5 * h, 1),
+    # (the lower incisors lean forwards: their labial gum recedes 3 mm towards the root)
+    prof = [((-0.6 if upper else 3.0) * MM, h + 4 * MM, 0), (0, h + 0.5 * MM, 0), (0, h, 1), (0, 0.5 * h, 1),
             (0.5 * MM, 0 * h, 1), (t - 0.5 * MM, 0 * h, 1), (t, 0.5 * h, 1), (t, h, 1),
             (t + 0.3 * MM, h + 0.5 * MM, 0), (t + 0.6 * MM, h + 4 * MM, 0)]
     sign = 1.0 if upper else -1.0
@@ -181,10 +182,10 @@ def mouth_parts(z_front, y_occlusal, tilt=np.tan(np.radians(10))):
     return out
 
 
-def template_parts(bone_vertices):
-    """The template's InnerParts. bone_vertices (B,3) m: the bone surfaces (cranium and jaw),
-    which put the incisors 1.5 mm behind the inner surface of the upper lip."""
-    B = np.asarray(bone_vertices, float)
+def template_parts(inner_vertices):
+    """The template's InnerParts. inner_vertices (B,3) m: the flesh's inner surface (the free
+    mucosa moved 1 mm forwards), which puts the incisors 1.5 mm behind the upper lip's."""
+    B = np.asarray(inner_vertices, float)
     near = (np.abs(B[:, 0]) < 8 * MM) & (B[:, 1] > MOUTH_Y) & (B[:, 1] < MOUTH_Y + 12 * MM)
     z_front = float(B[near, 2].max()) - 1.5 * MM
     parts = []
