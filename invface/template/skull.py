@@ -91,8 +91,10 @@ def _march(field, voxel):
     from skimage.measure import marching_cubes
 
     axes = [np.arange(lo, hi + 1e-9, voxel) for lo, hi in BOX]
-    P = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
-    vals = field(P.reshape(-1, 3)).reshape(P.shape[:3])
+    P = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    vals = np.concatenate([field(P[k:k + 100_000]) for k in range(0, len(P), 100_000)])
+    vals = vals.reshape([len(a) for a in axes])           # in chunks: the depth sites' weights
+    # are (points, sites, 3) floats
     V, F, _, _ = marching_cubes(vals, 0.0, spacing=(voxel,) * 3)
     V += [a[0] for a in axes]
     # the largest connected piece only (marching cubes leaves specks at thin junctions)
