@@ -127,15 +127,16 @@ def teeth(z_front, y_occlusal, tilt, half_width=27 * MM, depth=45 * MM, upper=Tr
     t = (7.0 + 3.0 * f) * MM                                           # crown thickness
     # profile (inward offset, height above the biting edge, is tooth) from the labial gum
     # over the crown to the lingual gum
-    # (the lower incisors lean forwards: their labial gum recedes 3 mm towards the root)
-    prof = [((-0.6 if upper else 3.0) * MM, h + 4 * MM, 0), (0, h + 0.5 * MM, 0), (0, h, 1), (0, 0.5 * h, 1),
+    prof = [(-0.6 * MM, h + 4 * MM, 0), (0, h + 0.5 * MM, 0), (0, h, 1), (0, 0.5 * h, 1),
             (0.5 * MM, 0 * h, 1), (t - 0.5 * MM, 0 * h, 1), (t, 0.5 * h, 1), (t, h, 1),
             (t + 0.3 * MM, h + 0.5 * MM, 0), (t + 0.6 * MM, h + 4 * MM, 0)]
     sign = 1.0 if upper else -1.0
     base_y = y_occlusal + (z_front - pos[:, 2]) * tilt
     rows, is_tooth = [], []
+    # the lower front teeth lean forwards (about 20 degrees), their roots behind their edges
+    lean = 0.0 if upper else 0.35 * (1 - f)
     for off, up, tooth in prof:
-        p = pos - np.asarray(off)[..., None] * normal
+        p = pos - (np.asarray(off) + lean * up)[..., None] * normal
         p[:, 1] = base_y + sign * up
         rows.append(p)
         is_tooth.append(np.full(len(pos), tooth))

@@ -30,8 +30,9 @@ def skin_field(p):
 
 def head_field(p, soft=True):
     """The skin's field (soft=True), or with soft=False the head without what no bone lies
-    under: the neck, the cartilaginous nose below the rhinion and the eyeballs under the lids
-    (the face whose inward offset is the skull, template.skull). p: (..., 3) m."""
+    under: the neck, the cartilaginous nose below the rhinion, the eyeballs under the lids and
+    the lips' vermilion rolls (the face whose inward offset is the skull, template.skull).
+    p: (..., 3) m."""
     q = p.copy()
     q[..., 0] = np.abs(q[..., 0])
     # Cranium, forehead and face masses.
@@ -71,8 +72,9 @@ def head_field(p, soft=True):
         f = smax(f, -ellipsoid(q, (0.0075, -0.0080, 0.1155), (0.0045, 0.0016, 0.0050)), 0.002)
     # philtrum and lips
     f = smin(f, ellipsoid(q, (0.0, -0.020, 0.103), (0.020, 0.012, 0.011)), 0.008)
-    f = smin(f, ellipsoid(q, (0.0, -0.0285, 0.1080), (0.0250, 0.0078, 0.0098)), 0.003)
-    f = smin(f, ellipsoid(q, (0.0, -0.0410, 0.1050), (0.0240, 0.0082, 0.0102)), 0.003)
+    if soft:    # the lips' vermilion rolls (no bone follows them)
+        f = smin(f, ellipsoid(q, (0.0, -0.0285, 0.1080), (0.0250, 0.0078, 0.0098)), 0.003)
+        f = smin(f, ellipsoid(q, (0.0, -0.0410, 0.1050), (0.0240, 0.0082, 0.0102)), 0.003)
     # mentolabial sulcus
     f = smax(f, -ellipsoid(q, (0.0, -0.0525, 0.1125), (0.016, 0.004, 0.004)), 0.004)
     return f
