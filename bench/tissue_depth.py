@@ -41,7 +41,8 @@ def main():
     for n, p, dd, ff in zip(names, P, d, flesh):
         t = DEPTH_SITES[n][3]
         mark = "" if DEPTH_SITES[n][4] else "  (not in the table)"
-        print(f"{n:18s} {np.array2string(p * 1000, precision=1, separator=','):>24s} {t * 1000:6.2f} "
+        at = "(" + ", ".join(f"{v:.1f}" for v in p * 1000 + 0.0) + ")"
+        print(f"{n:18s} {at:>24s} {t * 1000:6.2f} "
               f"{dd * 1000:6.2f} {dd / t - 1:+6.0%} {ff * 1000:6.2f}{mark}")
 
 

@@ -15,6 +15,7 @@ from ..render.preview import look_at_camera, render_meshes, to_srgb8
 
 SKIN = (0.80, 0.60, 0.50)
 BONE = (0.92, 0.88, 0.74)
+TOOTH = (0.97, 0.96, 0.92)
 VIEWS = {"front": (0.0, 0.03, 0.62), "three_quarter": (0.40, 0.05, 0.47)}   # camera positions, m
 
 
@@ -72,6 +73,8 @@ def scenes(model, jaw_open=0.25):
     V, F = model.neutral, model.triangles
     X, T = model.rest_positions, model.tets
     bone = [(model.cranium_mesh[0], model.cranium_mesh[1], BONE), (model.jaw_mesh[0], model.jaw_mesh[1], (0.75, 0.82, 0.95))]
+    if model.parts is not None:     # the teeth in the skull
+        bone += [model.parts.mesh(n) + (TOOTH,) for n in ("upper_teeth", "lower_teeth") if n in model.parts.names]
     cut = T[X[T].mean(1)[:, 0] < 0.0]
     cut_faces, owner = boundary_faces(cut)
     cut_is_plane = np.abs(X[cut_faces].mean(1)[:, 0]) < 0.004

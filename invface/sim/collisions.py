@@ -201,11 +201,11 @@ class Collisions:
 
     Contacts are fixed at set-up: ``v`` (c,) free boundary vertices, ``tri`` (c,3) triangles
     as ids into the point array Q = (flesh vertices (N), cranium mesh vertices, jaw mesh
-    vertices, each with its teeth) (``points``), the jaw's moved rigidly by the jaw transform. A flesh vertex is
-    paired with every free boundary triangle whose centroid is within ``radius`` at rest, that
-    faces it (normals opposed), has it on its outer side and shares no tet with it (the other
-    lip or lid), and with the BONE_PAIRS_PER_VERTEX nearest bone (or teeth) triangles within
-    ``radius`` facing it.
+    vertices, each with its teeth) (``points``), the jaw's moved rigidly by the jaw
+    transform. A flesh vertex is paired with every free boundary triangle whose centroid is
+    within ``radius`` at rest, that faces it (normals opposed), has it on its outer side and
+    shares no tet with it (the other lip or lid), and with the BONE_PAIRS_PER_VERTEX nearest
+    bone (or teeth) triangles within ``radius`` facing it within 60 degrees.
     """
 
     def __init__(self, model, free_mask, stiffness, radius=0.004):

@@ -103,8 +103,7 @@ def generate(resolution=1.0, progress=None, expressions=True):
 
     say("skull and mandible (marching cubes)")
     cranium_mesh, jaw_mesh = skull_meshes()
-    # the inner parts: the incisors go 1.5 mm behind the free mucosa, which lies 1 mm in front
-    # of the inner layer's surface there
+    # the inner parts: the free mucosa's inner layer moved 1 mm inwards places the incisors
     mucosa = X[inner].copy()
     d = mucosa - grid.CENTER
     mucosa -= np.where(region == 2, 0.001, 0.0)[:, None] * d / np.linalg.norm(d, axis=1, keepdims=True)

@@ -5,7 +5,7 @@ soft=False: no neck, no cartilaginous nose, no eyeballs) moved inwards by the fo
 tissue depth of shape.DEPTH_SITES, so the skin lies over the bone at the table's depths at
 every craniometric site. On that offset the bone's own features are cut and added:
 
-- cranium: orbits (40 x 34 mm openings, deep conical sockets), the pear-shaped nasal
+- cranium: orbits (39 x 31 mm openings, sockets narrowing backwards), the pear-shaped nasal
   (piriform) aperture under the nasal bones, zygomatic arches from the cheekbones back to
   the temporal bone, the maxilla ending at the alveolar (gum) line above the upper teeth;
 - mandible: the body from the chin to the angle (gonion), hollowed on its lingual side into
