@@ -101,7 +101,7 @@ def _march(field, voxel):
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]]])
-    n, lab = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), (len(V), len(V))))
+    _, lab = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), (len(V), len(V))))
     keep = lab == np.argmax(np.bincount(lab))
     F = F[keep[F].all(1)]
     used, inv = np.unique(F, return_inverse=True)
