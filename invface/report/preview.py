@@ -32,6 +32,7 @@ def _muscle_meshes(model):
     under the skin: the mimic muscles are straps."""
     from scipy.spatial import cKDTree
 
+    from ..mesh.sections import resample_even
     from ..mesh.tube import spindle, tube
     out = []
     cent = model.rest_positions[model.tets].mean(1)
@@ -39,10 +40,7 @@ def _muscle_meshes(model):
     for m, c in zip(model.muscles, _muscle_colors(len(model.muscles))):
         line = np.asarray(m.centerline, float)
         closed = len(line) > 2 and np.allclose(line[0], line[-1])
-        seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
-        s = np.concatenate([[0], np.cumsum(seg)])
-        u = np.linspace(0, s[-1], 40)
-        pts = np.stack([np.interp(u, s, line[:, k]) for k in range(3)], 1)
+        pts = resample_even(line, 40)
         dist, idx = cKDTree(pts).query(cent[m.tets])
         prof = spindle(len(pts), closed)
         belly = prof[idx] > 0.9

@@ -41,7 +41,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..mesh.tets import boundary_faces
-from ..mesh.triangles import face_normals, vertex_normals
+from ..mesh.triangles import face_normals, group_offsets, vertex_normals
 from .materials import project_psd
 
 CONTACT_SMOOTHING = 2e-5     # m: the cubic onset of the contact penalty
@@ -173,8 +173,7 @@ def _nearest_per_point(points, centroids, i, f, k):
     d = np.linalg.norm(points[i] - centroids[f], axis=1)
     order = np.lexsort((d, i))
     i, f = i[order], f[order]
-    first = np.searchsorted(i, i)                   # the group's first index, i being sorted
-    keep = np.arange(len(i)) - first < k
+    keep = group_offsets(np.bincount(i)) < k          # rank within each point's pairs
     return i[keep], f[keep]
 
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.parts import concatenate
-from .shape import EYE_CENTER, EYE_RADIUS, MOUTH_Y
+from .shape import EYE_CENTER, EYE_RADIUS, MOUTH_Y, OCCLUSAL_TILT
 
 MM = 1e-3
 SCLERA = (0.68, 0.64, 0.60)
@@ -155,7 +155,7 @@ def teeth(z_front, y_occlusal, tilt, half_width=27 * MM, depth=45 * MM, upper=Tr
     return V, F, alb
 
 
-def mouth_parts(z_front, y_occlusal, tilt=np.tan(np.radians(10))):
+def mouth_parts(z_front, y_occlusal, tilt=OCCLUSAL_TILT):
     """The teeth, tongue and cavity lining as (name, V, F, albedo, jaw weights) tuples."""
     out = []
     V, F, a = teeth(z_front, y_occlusal, tilt, upper=True)

@@ -21,6 +21,7 @@ MOUTH_CORNER = np.array([0.0250, -0.0355, 0.1010])
 JAW_PIVOT = np.array([0.0, 0.006, -0.004])       # midpoint between the condyles
 CONDYLE_X = 0.050
 RHINION_Y = 0.020                                # lower end of the nasal bones
+OCCLUSAL_TILT = np.tan(np.radians(10))           # the occlusal plane's rise towards the back
 
 
 def skin_field(p):

@@ -21,21 +21,21 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh.closest import closest_points
+from ..mesh.triangles import edge_components
 from . import grid
 from .sdf import ellipsoid, round_cone, smax, smin
-from .shape import CONDYLE_X, JAW_PIVOT, MOUTH_Y, head_field, tissue_depth
+from .shape import CONDYLE_X, JAW_PIVOT, MOUTH_Y, OCCLUSAL_TILT, head_field, tissue_depth
 
 VOXEL = 0.002                    # m, marching-cubes cell
 BOX = ((-0.090, 0.090), (-0.115, 0.165), (-0.115, 0.140))
 ALVEOLAR_UP = 0.009              # m above the occlusal plane: the maxilla's gum line
 ALVEOLAR_DOWN = 0.008            # m below it: the mandible's
-_TILT = np.tan(np.radians(10))   # the occlusal plane's rise towards the back (template.parts)
 
 
 def occlusal_y(z):
     """Height (m) of the occlusal plane at depth z (..., ) m: 1 mm under the stomion at the
     incisors, rising 10 degrees towards the back (as the teeth in template.parts)."""
-    return (MOUTH_Y - 0.001) + (0.108 - z) * _TILT
+    return (MOUTH_Y - 0.001) + (0.108 - z) * OCCLUSAL_TILT
 
 
 def _offset_face(p):
@@ -92,18 +92,13 @@ def _march(field, voxel):
 
     axes = [np.arange(lo, hi + 1e-9, voxel) for lo, hi in BOX]
     P = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    # in chunks: the depth sites' weights are (points, sites, 3) floats
     vals = np.concatenate([field(P[k:k + 100_000]) for k in range(0, len(P), 100_000)])
-    vals = vals.reshape([len(a) for a in axes])           # in chunks: the depth sites' weights
-    # are (points, sites, 3) floats
-    V, F, _, _ = marching_cubes(vals, 0.0, spacing=(voxel,) * 3)
+    V, F, _, _ = marching_cubes(vals.reshape([len(a) for a in axes]), 0.0, spacing=(voxel,) * 3)
     V += [a[0] for a in axes]
     # the largest connected piece only (marching cubes leaves specks at thin junctions)
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]]])
-    _, lab = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), (len(V), len(V))))
-    keep = lab == np.argmax(np.bincount(lab))
-    F = F[keep[F].all(1)]
+    comp = edge_components(F[:, [0, 1, 1, 2]], len(V))
+    F = F[comp[F[:, 0]] == np.argmax(np.bincount(comp))]
     used, inv = np.unique(F, return_inverse=True)
     return V[used], inv.reshape(-1, 3).astype(np.int64)       # skimage's winding: outwards
 
