@@ -64,8 +64,17 @@ def cmd_build_model(args):
     if args.neutral:
         if not args.output:
             raise InvfaceError("build-model --neutral needs -o/--output for the new model (.npz)")
-        build = build_model(args.neutral, blendshapes=args.blendshapes, unit=args.unit,
-                            expressions=args.expressions, resolution=args.resolution, progress=_events)
+        from .morph.build import BuildFailed
+        try:
+            build = build_model(args.neutral, blendshapes=args.blendshapes, unit=args.unit,
+                                expressions=args.expressions, resolution=args.resolution, progress=_events)
+        except BuildFailed as e:
+            if not args.preview:
+                raise
+            from .report.morph import write_failure_preview
+            path = write_failure_preview(e.found, args.preview)
+            raise InvfaceError(f"{e}" + (f"; the scan as aligned, with what was found, is drawn in {path}"
+                                         if path else "")) from None
         print("stage seconds: " + json.dumps({k: v for k, v in build.seconds.items() if k != "total"}))
     elif args.template or not args.input:
         print(f"building the template head (resolution {args.resolution:g})", flush=True)
@@ -433,7 +442,9 @@ def build_parser():
     b.add_argument("--template", action="store_true", help="the built-in template head (default)")
     b.add_argument("--neutral", help="the actor's neutral scan (OBJ/PLY) to morph the template onto")
     b.add_argument("--blendshapes", metavar="DIR", help="the actor's blendshapes (OBJ/PLY, the neutral's topology)")
-    b.add_argument("--unit", choices=["m", "cm", "mm"], help="the scan's unit (default: found from its size)")
+    b.add_argument("--unit", choices=["m", "cm", "mm"],
+                   help="the scan's unit (default: found from the face's size; a scan whose face fits no unit is "
+                        "scaled to an adult face)")
     b.add_argument("--expressions", choices=["simulate", "copy", "none"], default="simulate",
                    help="without --blendshapes: simulate the template's action units on the new anatomy "
                         "(default), copy the template's shapes, or none")

@@ -1,5 +1,6 @@
 """The model builder (paper 001): morph the template onto new faces, robustness, import."""
 import numpy as np
+from matplotlib.pyplot import imread as plt_imread
 from scipy.spatial.distance import pdist
 import pytest
 import trimesh
@@ -147,7 +148,7 @@ def test_real_scan_ict_neutral(small_model, tmp_path):
     from conftest import ICT
     from invface.mesh.meshfile import read_mesh
     from invface.mesh.tets import radius_ratio, signed_volumes
-    from invface.mesh.triangles import boundary_loops, umbrella
+    from invface.mesh.triangles import boundary_loops, boundary_vertices, umbrella
     if not (ICT / "neutral.obj").exists():
         pytest.skip("ICT-FaceKit data (../shared/data/ict-facekit) is not available")
     V, F = read_mesh(ICT / "neutral.obj")
@@ -164,9 +165,13 @@ def test_real_scan_ict_neutral(small_model, tmp_path):
     assert err[moved].mean() < 0.004, err[moved].mean()                         # 3.1 mm, offsets to 42
     # the skin is embedded smoothly: the simulated lip line does not tear into spikes where the
     # dense skin crosses the coarse lip tets' faces (barycentric: creases up to 12.7 mm)
+    # (measured off the skin's open edges, where the umbrella is one-sided: since the scan is
+    # aligned 2 cm lower than before issue 27, the template's neck edge lies on ICT's throat,
+    # where jawOpen moves it 2 cm from the simulation's, a 12 mm one-sided "crease")
     X = model.surface_model("simulation").result_at(p).X
     crease = umbrella(model.embedded_surface(X), model.triangles) - umbrella(target, model.triangles)
-    assert crease.max() < 0.006, crease.max()                                   # 4.0 mm
+    crease = crease[~boundary_vertices(model.triangles, len(model.neutral))]
+    assert crease.max() < 0.006, crease.max()                                   # 4.8 mm
     assert (signed_volumes(model.rest_positions, model.tets) > 0).all()
     assert radius_ratio(model.rest_positions, model.tets).min() >= 0.005
     assert res.stats["centerlines_inside"] > 0.9
@@ -286,8 +291,11 @@ def test_bad_meshes_named():
     V[5] = np.nan
     with pytest.raises(MeshError, match="scan.ply.*NaN"):
         clean(V, tri.faces, name="scan.ply")
-    with pytest.raises(MeshError, match="tiny.obj.*head size"):
-        clean(tri.vertices * 1e-5, tri.faces, name="tiny.obj")
+    # no unit fits a 3.5e-6 unit box: provisionally scaled, the face decides (build_model)
+    t = clean(tri.vertices * 1e-5, tri.faces, name="tiny.obj")
+    assert t.unit == "none" and np.isclose(np.linalg.norm(np.ptp(t.vertices, axis=0)), 0.3)
+    with pytest.raises(MeshError, match="flat.obj.*coincide"):
+        clean(np.zeros_like(tri.vertices), tri.faces, name="flat.obj")
     with pytest.raises(MeshError, match="at least"):
         clean(tri.vertices, tri.faces[:100], name="few.obj")
 
@@ -368,3 +376,88 @@ def test_imported_jaw_shape_drives_the_simulation(small_expressive_model, tmp_pa
         sim_x = model.surface_model("simulation").surface(p)
         d = closest_points(sim_x[on], truth, tpl.triangles)[2]
         assert d.mean() < 0.001 and np.quantile(d, 0.95) < 0.003, (name, d.mean(), np.quantile(d, 0.95))
+
+
+def _with_torso(Y, F, unit):
+    """A bust: the head (Y (n,3) file units, F) over a separate torso larger than the head
+    (an ellipsoid 46 x 26 x 30 cm whose top meets the neck), in the same file units."""
+    neck = Y[np.argmin(Y[:, 1])]
+    s = trimesh.creation.icosphere(4, radius=1.0)
+    T = s.vertices * np.array([0.23, 0.13, 0.15]) / unit + neck - np.array([0, 0.135, 0.04]) / unit
+    return np.concatenate([Y, T]), np.concatenate([F, s.faces + len(Y)])
+
+
+def _difficult_scan(tpl, kind):
+    """(file vertices, faces, metres per file unit, truth-landmark source (X, ids, faces)) of a
+    template identity with one real-scan difficulty (issue 27)."""
+    X = random_identity(tpl.neutral, 5, amplitude=0.003)
+    F = tpl.triangles
+    rng = np.random.default_rng(7)
+    if kind == "holes":              # scanner holes on the cheeks and forehead, 6 mm across
+        c = X[F].mean(1)
+        centres = X[tpl.landmarks["nose_tip"]] + np.array([[0.04, -0.01, -0.03], [-0.04, -0.01, -0.03],
+                                                            [0.02, 0.07, -0.02], [-0.03, 0.08, -0.03]])
+        F = F[np.min(np.linalg.norm(c[:, None] - centres[None], axis=2), axis=1) > 0.006]
+    # the head upright in front of the torso (a bust is scanned standing), in the file's unit
+    unit = {"no_unit": 1 / 37.3}.get(kind, 0.001)
+    Y = X / unit
+    if kind == "bust":
+        Y, F = _with_torso(Y, F, unit)
+    if kind == "spikes":             # ten spikes of 300 mm on the face
+        Y = Y.copy()
+        ids = rng.choice(np.flatnonzero(X[:, 2] > 0.05), 10, replace=False)
+        d = X[ids] - X.mean(0)
+        Y[ids] += 0.3 / unit * d / np.linalg.norm(d, axis=1, keepdims=True)
+    if kind == "second_piece":       # a ball apart from the head, a quarter of its size
+        s = trimesh.creation.icosphere(3, radius=0.05 / unit)
+        Y = np.concatenate([Y, s.vertices + Y.mean(0) + np.array([0.2, 0, 0]) / unit])
+        F = np.concatenate([F, s.faces + len(X)])
+    return Y, F, unit, X
+
+
+@pytest.mark.parametrize("kind", ["bust", "spikes", "holes", "second_piece", "no_unit"])
+def test_real_scan_difficulties_build(kind, small_expressive_model):
+    """Issue 27: a template identity with shoulders (a torso larger than the head), ten
+    300 mm spikes, holes, a second piece, or no unit builds with no inverted tet and the
+    sharp landmarks within 3 mm of the known ones; the unit comes from the face."""
+    tpl = small_expressive_model
+    Y, F, unit, X = _difficult_scan(tpl, kind)
+    model, res = build_model((Y, F), template=tpl, expressions="none")
+    st = res.stats
+    assert st["quality"]["inverted"] == 0
+    if kind == "no_unit":
+        assert st["unit"] == "none" and "no physical unit" in st["unit_summary"]
+        assert abs(st["scale"] * 37.3 - 1) < 0.1            # the adult face's size, within 10 %
+    else:
+        assert st["unit"] == "mm" and np.isclose(st["scale"], 0.001), st["unit_summary"]
+    if kind == "bust":
+        assert any(n.startswith("cropped") for n in st["cleaning"]), st["cleaning"]
+    if kind == "spikes":
+        assert any("10 spike vertices" in n for n in st["cleaning"]), st["cleaning"]
+    A = model.scan_transform
+    truth = X / unit @ A[:3, :3].T + A[:3, 3]               # the identity in the model frame
+    tl = template_landmarks(tpl)
+    tri, w, _ = closest_points(np.array(list(tl.values())), tpl.neutral, tpl.triangles)
+    known = dict(zip(tl, np.einsum("nk,nkj->nj", w, truth[tpl.triangles[tri]])))
+    err = {k: np.linalg.norm(res.landmarks[k] - known[k]) * 1000 for k in SHARP}
+    assert max(err.values()) < 3.0, err
+
+
+def test_failed_build_names_its_stage_and_draws_what_it_found(small_model, tmp_path, monkeypatch):
+    """When a stage cannot go on, the error names the stage and keeps its cause, and the
+    failure preview draws the aligned scan with the landmarks found by then (issue 27)."""
+    import invface.morph.build as mb
+    from invface.report.morph import write_failure_preview
+
+    def no_curves(V, F, L):
+        raise MeshError("no section joins the eye corners")
+    monkeypatch.setattr(mb, "curve_set", no_curves)
+    V, F = small_model.neutral, small_model.triangles
+    with pytest.raises(mb.BuildFailed, match="curves stage: no section joins the eye corners") as e:
+        mb.build_model((V * 1000, F), template=small_model, expressions="none")
+    found = e.value.found
+    assert e.value.stage == "curves" and found["aligned"].shape == found["target"].vertices.shape
+    assert set(found["landmarks"]) >= {"nose_tip", "chin"}
+    path = write_failure_preview(found, tmp_path, size=120, spp=2)
+    img = plt_imread(path)
+    assert img.shape[:2] == (120, 240) and img[..., :3].std() > 0.05    # a drawn scan, not a blank

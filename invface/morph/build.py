@@ -1,7 +1,9 @@
 """Build a simulatable FaceModel for a new actor by morphing the template (paper 001).
 
-Pipeline: clean the scan (target.py) -> orientation, symmetry and rigid alignment to the
-template (orient.py); inner lips and lids behind the openings left out (openings.py) ->
+Pipeline: clean the scan, spikes and stray pieces removed (target.py) -> orientation,
+symmetry and rigid alignment to the template (orient.py), the unit decided from the face
+(units.py), what is not head cropped (crop.py); inner lips and lids behind the openings left
+out (openings.py) ->
 fixed-stencil curvature and landmarks (curvature.py, landmarks.py) -> feature curves
 (curves.py) -> surface Poisson morph, snapping, inverted-triangle relaxation, partial-scan
 completion (surface.py) -> volumetric morph of flesh, bones,
@@ -30,11 +32,12 @@ from ..model.facemodel import FaceModel
 from .blendshapes import read_blendshapes, recognised
 from .jaw import split_jaw
 from .curves import curve_set
-from .landmarks import ear_boxes, find_landmarks, template_landmarks
-from .openings import ACROSS, MAX_INNER_FRACTION, inner_surfaces, map_openings, opening_centres
-from .orient import align_to_template
+from .crop import crop_to_head
+from .landmarks import ear_boxes, face_similarity, find_landmarks, template_landmarks
+from .openings import ACROSS, MAX_INNER_FRACTION, closed_seams, inner_surfaces, map_openings, opening_centres
 from .surface import SurfacePoisson, morph_surface
 from .target import Target, clean, drop_faces
+from .units import settle_unit
 from .volume import carry_bone, carry_fibers, carry_points, carry_similar, inside_fraction, morph_volume
 
 EXPRESSIONS = ("simulate", "copy", "none")
@@ -119,6 +122,31 @@ def adapt_identity(model, displacement, progress=None):
     return new
 
 
+def face_vertices(model):
+    """Skin vertex ids (k,) of the face: between the chin and 2 cm above the eye corners,
+    within 1.5 cm outside the outer eye corners, in front of the ears (6 cm behind the nose
+    tip). Where the build is measured against the scan: snapped or filled, every vertex."""
+    V = model.neutral
+    lm = {k: V[v] for k, v in model.landmarks.items()}
+    top = max(lm["eye_outer_L"][1], lm["eye_outer_R"][1]) + 0.02
+    side = max(abs(lm["eye_outer_L"][0]), abs(lm["eye_outer_R"][0])) + 0.015
+    return np.flatnonzero((V[:, 1] > lm["chin"][1]) & (V[:, 1] < top) & (np.abs(V[:, 0]) < side)
+                          & (V[:, 2] > lm["nose_tip"][2] - 0.06))
+
+
+STAGES = ("clean", "orient", "landmarks", "curves", "surface", "volume", "blendshapes", "tracks")
+
+
+class BuildFailed(MeshError):
+    """The builder could not go on: ``stage`` (one of STAGES) and what it had found by then
+    (``found``: 'target' (Target), 'aligned' (n,3) model frame, 'landmarks', 'curves'), for
+    a preview of why (report.morph.write_failure_preview)."""
+
+    def __init__(self, message, stage, found):
+        super().__init__(message)
+        self.stage, self.found = stage, found
+
+
 def build_model(neutral, blendshapes=None, template=None, unit=None, expressions="copy",
                 progress=None):
     """Morph the template onto an actor's neutral scan. Returns (FaceModel, MorphResult).
@@ -126,14 +154,29 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     neutral: path to an OBJ/PLY, or (vertices (n,3), faces (f,3)) in file units.
     blendshapes: folder of OBJ/PLY files sharing the neutral's topology (optional).
     template: the template FaceModel (default: the built-in one at resolution 1).
-    unit: 'm', 'cm' or 'mm' (default: found from the size).
+    unit: 'm', 'cm' or 'mm' (default: found from the face, units.settle_unit).
     expressions (without blendshapes): 'simulate' the template's action units on the new
     anatomy, 'copy' the template's deltas, or 'none'.
+    Raises BuildFailed (a MeshError naming the stage, with what was found) when a stage cannot
+    go on.
     """
     if expressions not in EXPRESSIONS:
         raise ConfigError(f"expressions must be one of {', '.join(EXPRESSIONS)}, got '{expressions}'")
-    say = progress or (lambda m: None)
+    found = {}
     secs = {}
+    try:
+        return _build(neutral, blendshapes, template, unit, expressions, progress, secs, found)
+    except BuildFailed:
+        raise
+    except MeshError as e:
+        stage = STAGES[min(len(secs), len(STAGES) - 1)]
+        raise BuildFailed(f"the build stopped in its {stage} stage: {e}", stage, found) from None
+
+
+def _build(neutral, blendshapes, template, unit, expressions, progress, secs, found):
+    """build_model's stages; ``secs`` gets each finished stage's seconds and ``found`` what
+    was found so far (for a failure's preview)."""
+    say = progress or (lambda m: None)
     t = time.perf_counter()
 
     def lap(name):
@@ -158,14 +201,18 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
         names, D = read_blendshapes(blendshapes, len(raw_V), np.asarray(raw_V, float))
     target = clean(raw_V, raw_F, name=name, unit=unit, shapes=D)
     lap("clean")
-    say(f"target: {len(target.vertices)} vertices, unit {target.unit}" +
-        (f" ({'; '.join(target.notes)})" if target.notes else ""))
+    say(f"target: {len(target.vertices)} vertices" + (f" ({'; '.join(target.notes)})" if target.notes else ""))
 
-    say("orientation, symmetry plane and alignment to the template")
-    al = align_to_template(target.vertices, target.faces, template)
+    say("orientation, symmetry plane, alignment to the template and the unit (from the face)")
+    target, al, scaling = settle_unit(target, template, unit, progress=say)
     if al.residual > 0.01:
         raise MeshError(f"{target.name}: after alignment the scan lies {al.residual * 1000:.1f} mm (median) from "
                         "the template's face; it does not look like a face, or too little of one")
+    target = replace(target, unit=scaling.unit)
+    target, _ = crop_to_head(target, al.apply(target.vertices), template,
+                             *face_similarity(template, al.apply(target.vertices), target.faces))
+    if target.notes and target.notes[-1].startswith("cropped"):
+        say(target.notes[-1])
     TL = template_landmarks(template)
     inner = inner_surfaces(al.apply(target.vertices), target.faces, opening_centres(TL))
     if inner.mean() > MAX_INNER_FRACTION:
@@ -176,10 +223,12 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
                                            "hidden behind the lip and lid lines")
         say(target.notes[-1])
     Va, Fg = al.apply(target.vertices), target.faces
+    found.update(target=target, aligned=Va)
     lap("orient")
 
     say("landmarks (fixed-stencil curvature)")
     L, off_scan = find_landmarks(Va, Fg, template)
+    found["landmarks"] = L
     if off_scan:
         say(f"partial scan: {', '.join(off_scan)} off the scan (on its edge); their curves are left out and "
             "the head is completed from the template")
@@ -190,6 +239,7 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     Ct = curve_set(template.neutral, template.triangles, TL)
     if off_scan:
         Ct, Cg = ({k: c for k, c in C.items() if not set(k) & set(off_scan)} for C in (Ct, Cg))
+    found["curves"] = Cg
     lap("curves")
 
     rid, rpos, opened = map_openings(template.neutral, template.triangles, TL, Va, Fg, L)
@@ -198,8 +248,9 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
         across = {k for name in opened for k in ACROSS[name]}
         Ct, Cg = ({k: c for k, c in C.items() if k not in across} for C in (Ct, Cg))
     ears = ear_boxes(Va, Fg, L)
+    seams = closed_seams(template.neutral, template.triangles, TL, Va, Fg, L, opened)
     surf = morph_surface(template.neutral, template.triangles, Va, Fg, Ct, Cg, rims=(rid, rpos), no_snap=ears,
-                         progress=say)
+                         seams=seams, progress=say)
     lap("surface")
 
     model, vm = carry_anatomy(template, surf.positions, progress=say)
@@ -242,13 +293,17 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     tri, bw, _ = closest_points(np.array([TL[k] for k in TL]), template.neutral, template.triangles)
     on_model = dict(zip(TL, barycentric_points(model.neutral, template.triangles, tri, bw)))
     dist = closest_points(model.neutral[surf.snapped], Va, Fg)[2]
+    face = closest_points(model.neutral[face_vertices(model)], Va, Fg)[2] * 1000
     q = quality_summary(model.rest_positions, model.tets)
     stats = {
-        "unit": target.unit, "scale": target.scale, "cleaning": target.notes,
+        "unit": target.unit, "scale": target.scale, "unit_summary": scaling.summary,
+        "face_scale": scaling.face_scale, "cleaning": target.notes,
         "symmetry_error_mm": al.frame.symmetry_error * 1000,
         "alignment_residual_mm": al.residual * 1000, "flipped_residual_mm": al.flipped_residual * 1000,
         "landmark_to_morph_mm": {k: float(np.linalg.norm(on_model[k] - L[k]) * 1000) for k in L},
         "surface_to_target_mm": {"mean": float(dist.mean() * 1000), "max": float(dist.max() * 1000)},
+        "face_to_scan_mm": {"median": float(np.median(face)), "p95": float(np.percentile(face, 95)),
+                            "max": float(face.max())},
         "off_scan_landmarks": list(off_scan), "openings_mapped": opened, "ear_boxes": len(ears), "snapped_fraction": float(surf.snapped.mean()), "inverted_triangles": surf.inverted,
         "triangle_relax_rounds": surf.relax_rounds, "tet_relaxed_vertices": vm.relaxed_vertices, "inner_pushed": vm.pushed,
         "tet_relax_rounds": vm.relax_rounds, "quality": q,

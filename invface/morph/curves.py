@@ -36,6 +36,7 @@ CURVES = (
 )
 SAMPLES = 40             # points per curve
 SNAP_TOL = 0.003         # m: a section must pass this close to both landmarks
+MAX_DETOUR = 1.6         # a section piece longer than this times the landmarks' distance is refused
 
 
 def _project(V, F, P):
@@ -46,7 +47,9 @@ def _project(V, F, P):
 def landmark_curve(V, F, a, b, normals_at=None):
     """Polyline (SAMPLES,3) on the mesh from point a to point b (3,), equally spaced in arc
     length: the plane section through a, b and their mean normal; where holes break the
-    section, the straight segment projected onto the mesh."""
+    section, or its piece between them is more than MAX_DETOUR times their distance long (an
+    ICT-FaceKit section from the ala to the mouth corner ran 616 mm through the nostril's
+    cavity), the straight segment projected onto the mesh."""
     n = normals_at if normals_at is not None else np.array([0, 0, 1.0])
     plane_n = np.cross(b - a, n)
     if np.linalg.norm(plane_n) > 1e-9:
@@ -63,6 +66,8 @@ def landmark_curve(V, F, a, b, normals_at=None):
             else:
                 piece = P[ia:ib + 1] if ia <= ib else P[ib:ia + 1][::-1]
             piece = np.concatenate([[a], piece, [b]])
+            if arc_length(piece)[-1] > MAX_DETOUR * np.linalg.norm(b - a):
+                continue       # the section wanders (into a nostril and out again): not this one
             return resample_even(piece, SAMPLES)
     t = np.linspace(0, 1, SAMPLES)[:, None]
     return _project(V, F, a + t * (b - a))

@@ -184,19 +184,23 @@ def ear_boxes(V, F, L, grow=0.005):
     return np.array(boxes).reshape(-1, 2, 3)
 
 
-def _chin(P, tip, drop=0.03, prominence=0.002):
+def _chin(P, tip, prior, drop=0.03, prominence=0.002):
     """Index of the chin on the profile P (n,3, bottom to top): going down from the nose tip,
-    the first point (at least ``drop`` below the tip) that is a local maximum of z - y, the
-    support point in the down-and-forward direction (the gnathion, where the surface turns
-    from facing forward to facing down). A scan with a neck flares forward again at the
-    neck's base; taking the first maximum, not the global one, stops at the chin."""
+    the local maximum of z - y (at least ``drop`` below the tip) nearest the ``prior`` chin
+    (3,) (the template's, carried by the face similarity): the support point in the
+    down-and-forward direction (the gnathion, where the surface turns from facing forward to
+    facing down). A full lower lip is such a maximum 3 cm above it (an ICT-FaceKit identity's
+    was taken for the chin when the first maximum was), and a scan with a neck flares forward
+    again at the neck's base below it."""
     down = np.arange(tip, -1, -1)
     down = down[P[down, 1] < P[tip, 1] - drop]
     if len(down) < 3:
         raise MeshError("the profile ends below the nose: no chin found")
     f = P[down, 2] - P[down, 1]
     peaks, _ = find_peaks(f, prominence=prominence)
-    return int(down[peaks[0]] if len(peaks) else down[np.argmax(f)])
+    if not len(peaks):
+        return int(down[np.argmax(f)])
+    return int(down[peaks[np.argmin(np.linalg.norm(P[down[peaks]] - prior, axis=1))]])
 
 
 def find_landmarks(V, F, model):
@@ -242,7 +246,7 @@ def find_landmarks(V, F, model):
     if not above.any():
         raise MeshError("no nose bridge above the nose tip on the profile")
     L["nose_bridge"] = P[idx[above][np.argmin(z[above])]]
-    chin = _chin(P, tip)
+    chin = _chin(P, tip, prior["chin"])
     L["chin"] = P[chin]
     loops = boundary_loops(F)
 

@@ -130,3 +130,31 @@ def map_openings(Vt, Ft, TL, Vg, Fg, L):
     ids, pos = np.concatenate(ids), np.concatenate(pos)
     ids, first = np.unique(ids, return_index=True)      # corners are in both halves
     return ids, pos[first], names
+
+
+def closed_seams(Vt, Ft, TL, Vg, Fg, L, opened=(), tol=1e-7, reach=OPENING_REACH / 2):
+    """The template's closed slits as seams: pairs (P,2) of template vertex ids, the upper
+    and the lower side of the same slit point (they coincide in the template's neutral), of
+    every opening of OPENINGS where the aligned scan (Vg, Fg; landmarks L) is closed: not in
+    ``opened`` (those map onto a scan's rims) and with no hole of the scan within ``reach``
+    of the opening's centre (a hole whose rim could not be split at the corners is left to
+    the vertex-by-vertex snap, as before).
+
+    A scan whose eyes or lips are closed has no rim to map; snapped vertex by vertex, the two
+    sides of the slit find different walls of the lip or lid line's groove and the slit tears
+    open (15 mm at the mouth of a bust, issue 27). ``surface.morph_surface`` holds each pair
+    together on the scan instead."""
+    from scipy.spatial import cKDTree
+    b = np.flatnonzero(np.bincount(boundary_edges(Ft).ravel(), minlength=len(Vt)))
+    pairs = np.array(sorted(cKDTree(Vt[b]).query_pairs(tol)), np.int64).reshape(-1, 2)
+    pairs = b[pairs]
+    if not len(pairs):
+        return pairs
+    centres = opening_centres(TL)
+    names = list(OPENINGS)
+    holes = [Vg[lp].mean(0) for lp in ordered_loops(Fg)]
+    on_scan = opening_centres(L)
+    closed = [n not in opened and not any(np.linalg.norm(h - c) < reach for h in holes)
+              for n, c in zip(names, on_scan)]
+    near = np.argmin(np.linalg.norm(Vt[pairs[:, 0]][:, None] - centres[None], axis=2), axis=1)
+    return pairs[np.asarray(closed)[near]]

@@ -4,18 +4,21 @@
 2. The left/right symmetry plane: of the three planes through the centre of mass normal to
    an axis, the one with the least reflection error (mean distance from each reflected point
    to the closest point on the mesh).
-3. The profile curve (mesh ∩ symmetry plane); the nose tip is the local maximum of the
-   distance from the centre of mass that scores best as a nose: it sticks out of the profile
-   on both sides (bridge above, subnasale below) more than any other candidate.
+3. The profile curve (mesh ∩ symmetry plane); nose-tip candidates are the local maxima of
+   the distance from the centre of mass that stick out of the profile on both sides (bridge
+   above, subnasale below) as a wedge, the sharpest ones first. The paper takes the best
+   one; on busts a crown's rim or the cut base can be sharper than the nose, so the
+   candidates are kept and step 5 chooses.
 4. Refinement of the plane's three free parameters (two tilts, one offset) on the nose and
-   cheek region only (the forward 30 % of the box, within 20 % of its height of the nose).
+   cheek region only (within 6 cm of the nose tip's height, 7.5 cm behind it).
 
 5. Up/down: the frame leaves the sign of "up" open (both signs give a valid right-handed
-   frame). Each candidate is mapped onto the template through the template's own frame and
-   refined by trimmed rigid ICP on the face around the nose; the candidate that fits the
-   template better wins. This replaces the paper's nose-shape scores for the sign, which
-   the generated template's blunt nose does not follow. The winning ICP pose is the rigid
-   part of ``model.scan_transform``.
+   frame). Each nose candidate with each sign is mapped onto the template through the
+   template's own frame and refined by trimmed rigid ICP on the face around the nose; the
+   candidate that fits the template best wins. This replaces the paper's nose-shape scores
+   for the sign, which the generated template's blunt nose does not follow. A scan in several
+   large pieces (a head beside its stand) also gets each piece's own frames. The winning ICP
+   pose is the rigid part of ``model.scan_transform``.
 """
 from __future__ import annotations
 
@@ -27,10 +30,15 @@ from scipy.optimize import minimize
 from ..errors import MeshError
 from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.sections import arc_length, plane_sections, resample
-from ..mesh.triangles import triangle_areas
+from ..mesh.triangles import edge_components, triangle_areas
 
 NOSE_ARC = 0.015         # m along the profile either side of a nose-tip candidate
 MAX_NOSE_ANGLE_DEG = 135
+NOSE_CANDIDATES = 8      # profile wedges tried as the nose tip
+FULL_ICP = 3             # of the candidate poses after a quick ICP, the best refined fully
+HEAD_REACH = 0.12        # m: the head around a nose tip (its centroid sets "forward")
+REFINE_HEIGHT = 0.06     # m: the symmetry plane is refined on the nose and cheeks, this far
+REFINE_DEPTH = 0.075     # above/below and behind the nose tip
 
 
 @dataclass
@@ -70,13 +78,11 @@ def _samples(V, n, seed=0):
     return V[rng.choice(len(V), size=min(n, len(V)), replace=False)]
 
 
-def _profile(V, F, origin, normal, near=None):
-    """The profile polyline: the plane section chain passing nearest ``near`` (or the longest)."""
+def _profile(V, F, origin, normal, near):
+    """The profile polyline: the plane section chain passing nearest ``near`` (3,)."""
     chains = plane_sections(V, F, origin, normal)
     if not chains:
         raise MeshError("the symmetry plane does not cut the mesh: is this a face?")
-    if near is None:
-        return chains[0].points
     d = [np.linalg.norm(c.points - near, axis=1).min() for c in chains]
     return chains[int(np.argmin(d))].points
 
@@ -109,73 +115,112 @@ def _nose_scores(P, c):
     return out
 
 
-def find_frame(V, F, n_samples=1500, refine=True):
-    """The face frame of a cleaned mesh in metres (V (n,3), F (f,3)). Raises MeshError when
-    no nose-like feature is found (the mesh is not a face)."""
-    c, inertia = shell_inertia(V, F)
-    _, axes = np.linalg.eigh(inertia)
-    S = _samples(V, n_samples)
-    errs = [symmetry_error(V, F, S, c, axes[:, k]) for k in range(3)]
-    n_sym = axes[:, int(np.argmin(errs))]
-
-    P = _profile(V, F, c, n_sym)
-    cands = _nose_scores(P, c)
-    if not cands:
-        raise MeshError("no nose found on the profile curve: the mesh does not look like a face")
-    i, angle = min(cands, key=lambda t: t[1])
-    if angle > np.radians(MAX_NOSE_ANGLE_DEG):
-        raise MeshError(f"no nose found: the sharpest point of the profile opens {np.degrees(angle):.0f} degrees "
-                        f"(a nose tip: under {MAX_NOSE_ANGLE_DEG} degrees); the mesh does not look like a face")
-    tip = P[i]
-    f = (tip - c) / np.linalg.norm(tip - c)
+def _face_frame(V, F, c, n_sym, err, tip, refine, n_samples):
+    """The Frame whose nose tip is ``tip`` (3,) on the profile of the plane (c, n_sym)."""
+    # forward: from the centroid of the head around the tip (a bust's or a torso's centre of
+    # mass lies low in the chest, and its direction to the nose tip would tilt the face up)
+    cen = V[F].mean(1)
+    head = np.linalg.norm(cen - tip, axis=1) < HEAD_REACH
+    area = triangle_areas(V, F)
+    ch = np.average(cen[head], axis=0, weights=area[head]) if area[head].sum() > 0 else c
+    f = tip - ch
+    f -= (f @ n_sym) * n_sym
+    f /= np.linalg.norm(f)
     y = np.cross(n_sym, f)          # up or down: decided by the template alignment
     z = np.cross(y, np.cross(f, y))
     z /= np.linalg.norm(z)
     x = np.cross(y, z)
     R = np.stack([x, y, z])
     origin = c - ((c - tip) @ x) * x         # on the plane
-    err = min(errs)
+    P = _profile(V, F, origin, x, near=tip)
+    fr = Frame(origin, R, tip, err, P)
+    return refine_frame(V, F, fr, c, n_samples) if refine else fr
 
-    if refine:
-        # nose and cheeks: forward 30 % of the box, within 20 % of its height of the nose tip
-        L = (V - origin) @ R.T
-        lo, hi = L.min(0), L.max(0)
-        tipL = (tip - origin) @ R.T
-        keep = (L[:, 2] > hi[2] - 0.3 * (hi[2] - lo[2])) & (np.abs(L[:, 1] - tipL[1]) < 0.2 * (hi[1] - lo[1]))
-        region = V[keep]
-        if len(region) > 50:
-            region = _samples(region, n_samples, seed=1)
 
-            def plane(q):
-                a, b, d = q
-                n = R[0] + a * R[1] + b * R[2]
-                return origin + d * R[0], n / np.linalg.norm(n)
+def refine_frame(V, F, fr, c, n_samples=1500):
+    """The Frame ``fr`` with its symmetry plane refined (two tilts, one offset) on the nose and
+    cheeks: within REFINE_HEIGHT of the tip's height and REFINE_DEPTH behind it (c: the
+    centre of mass, which stays on the plane)."""
+    origin, R, tip, err, P = fr.origin, fr.R, fr.nose_tip, fr.symmetry_error, fr.profile
+    L = (V - origin) @ R.T
+    tipL = (tip - origin) @ R.T
+    keep = (L[:, 2] > tipL[2] - REFINE_DEPTH) & (np.abs(L[:, 1] - tipL[1]) < REFINE_HEIGHT)
+    region = V[keep]
+    if len(region) > 50:
+        region = _samples(region, n_samples, seed=1)
 
-            res = minimize(lambda q: symmetry_error(V, F, region, *plane(q)), np.zeros(3),
-                           method="Nelder-Mead",
-                           options={"xatol": 1e-4, "fatol": 1e-7, "initial_simplex":
-                                    np.array([[0, 0, 0], [0.05, 0, 0], [0, 0.05, 0], [0, 0, 0.005]])})
-            o2, n2 = plane(res.x)
-            x = n2
-            y = R[1] - (R[1] @ x) * x
-            y /= np.linalg.norm(y)
-            z = np.cross(x, y)
-            R = np.stack([x, y, z])
-            origin = c - ((c - o2) @ x) * x
-            err = float(res.fun)
-            P = _profile(V, F, origin, x, near=tip)
-            # the tip: the most forward profile point near the old tip
-            near = np.linalg.norm(P - tip, axis=1) < 0.02
-            cand = np.flatnonzero(near) if near.any() else np.arange(len(P))
-            tip = P[cand[np.argmax((P[cand] - origin) @ z)]]
+        def plane(q):
+            a, b, d = q
+            n = R[0] + a * R[1] + b * R[2]
+            return origin + d * R[0], n / np.linalg.norm(n)
+
+        res = minimize(lambda q: symmetry_error(V, F, region, *plane(q)), np.zeros(3),
+                       method="Nelder-Mead",
+                       options={"xatol": 1e-4, "fatol": 1e-7, "initial_simplex":
+                                np.array([[0, 0, 0], [0.05, 0, 0], [0, 0.05, 0], [0, 0, 0.005]])})
+        o2, n2 = plane(res.x)
+        x = n2
+        y = R[1] - (R[1] @ x) * x
+        y /= np.linalg.norm(y)
+        z = np.cross(x, y)
+        R = np.stack([x, y, z])
+        origin = c - ((c - o2) @ x) * x
+        err = float(res.fun)
+        P = _profile(V, F, origin, x, near=tip)
+        # the tip: the most forward profile point near the old tip
+        near = np.linalg.norm(P - tip, axis=1) < 0.02
+        cand = np.flatnonzero(near) if near.any() else np.arange(len(P))
+        tip = P[cand[np.argmax((P[cand] - origin) @ z)]]
     return Frame(origin, R, tip, err, P)
+
+
+def find_frames(V, F, n_samples=1500, refine=True, candidates=NOSE_CANDIDATES):
+    """Face frames of a cleaned mesh in metres (V (n,3), F (f,3)), one per nose-tip candidate
+    (the ``candidates`` sharpest wedges of the profile, sharpest first). Raises MeshError when
+    no nose-like feature is found (the mesh is not a face).
+
+    The sharpest wedge is not always the nose: a bust's base, a crown's rim or a cut-off
+    shoulder can be sharper, so ``align_to_template`` lets the template's face choose."""
+    c, inertia = shell_inertia(V, F)
+    _, axes = np.linalg.eigh(inertia)
+    S = _samples(V, n_samples)
+    errs = [symmetry_error(V, F, S, c, axes[:, k]) for k in range(3)]
+    n_sym = axes[:, int(np.argmin(errs))]
+
+    chains = plane_sections(V, F, c, n_sym)
+    if not chains:
+        raise MeshError("the symmetry plane does not cut the mesh: is this a face?")
+    # every piece of the profile (a bust's stand or a second piece has its own), with the
+    # nose seen from the centre of mass and from the piece's own centre (a torso's centre of
+    # mass lies so far below a head that the nose is no maximum of the distance from it)
+    found = {}
+    for ch in chains:
+        if len(ch.points) > 4:
+            for centre in (c, ch.points.mean(0)):
+                for i, a in _nose_scores(ch.points, centre):
+                    key = tuple(np.round(ch.points[i], 6))
+                    found[key] = min(a, found.get(key, np.inf))
+    cands = sorted(((np.array(k), a) for k, a in found.items()), key=lambda t: t[1])
+    if not cands:
+        raise MeshError("no nose found on the profile curve: the mesh does not look like a face")
+    if cands[0][1] > np.radians(MAX_NOSE_ANGLE_DEG):
+        raise MeshError(f"no nose found: the sharpest point of the profile opens {np.degrees(cands[0][1]):.0f} "
+                        f"degrees (a nose tip: under {MAX_NOSE_ANGLE_DEG} degrees); the mesh does not look like a face")
+    tips = [p for p, a in cands if a <= np.radians(MAX_NOSE_ANGLE_DEG)][:candidates]
+    return [_face_frame(V, F, c, n_sym, min(errs), tip, refine, n_samples) for tip in tips]
+
+
+def find_frame(V, F, n_samples=1500, refine=True):
+    """The face frame of the sharpest nose-tip candidate (``find_frames``)."""
+    return find_frames(V, F, n_samples, refine, candidates=1)[0]
 
 
 @dataclass
 class Alignment:
     """Rigid map of target metres into the model frame: x_model = R @ x + t. residual: the
     median distance (m) from the target's face samples to the template after ICP; frame:
-    the target's Frame; flipped_residual: the other up/down candidate's residual."""
+    the target's Frame; flipped_residual: the next best candidate's (another nose tip or the
+    other up/down sign)."""
     R: np.ndarray
     t: np.ndarray
     residual: float
@@ -230,23 +275,50 @@ def template_frame(model):
     return _TEMPLATE_FRAMES[key]
 
 
-def align_to_template(V, F, model, radius=0.09, n_samples=2000):
+def _piece_frames(V, F, share=0.1):
+    """Unrefined Frames of the whole mesh and, when it has several large pieces (at least
+    ``share`` of the largest's area: a head beside its stand or a second scan piece), of each
+    piece on its own, whose symmetry plane the others do not tilt. Raises the first piece's
+    MeshError when none has a nose."""
+    comp = edge_components(F[:, [0, 1, 1, 2]], len(V))[F[:, 0]]
+    area = np.bincount(comp, weights=triangle_areas(V, F))
+    big = np.flatnonzero(area >= share * area.max())
+    meshes = [F] + ([F[comp == k] for k in big] if len(big) > 1 else [])
+    frames, error = [], None
+    for Fk in meshes:
+        try:
+            frames += find_frames(V, Fk, refine=False)
+        except MeshError as e:
+            error = error or e
+    if not frames:
+        raise error
+    return frames
+
+
+def align_to_template(V, F, model, radius=0.09, n_samples=2000, quick=8):
     """Rigid alignment of a cleaned target (V (n,3) m, F) onto the template ``model``.
 
-    Uses the target's Frame (symmetry plane, nose tip) against the template's, tries both
-    up/down signs, refines each by ICP on target points within ``radius`` of the nose tip.
+    For each of the target's Frames (``find_frames``: symmetry plane, a nose-tip candidate)
+    and both up/down signs, the target points within ``radius`` of the nose tip are mapped
+    through the template's frame and refined by ``quick`` ICP iterations; the FULL_ICP best
+    poses are refined to convergence, and the best of those wins; its frame's symmetry plane
+    is refined (``refine_frame``).
     """
-    fr = find_frame(V, F)
     tf = template_frame(model)
-    near = V[np.linalg.norm(V - fr.nose_tip, axis=1) < radius]
-    P = _samples(near, n_samples, seed=2)
-    best = []
-    for sg in (1, -1):
-        Rt = np.diag([sg, sg, 1.0]) @ fr.R           # flip up (and left, to stay right-handed)
-        # target -> frame coords (origin at the nose tip) -> template coords
-        R0 = tf.R.T @ Rt
-        t0 = tf.nose_tip - R0 @ fr.nose_tip
-        best.append(rigid_icp(P, model.neutral, model.triangles, R0, t0))
-    k = int(np.argmin([b[2] for b in best]))
-    R, t, med = best[k]
-    return Alignment(R, t, med, fr, best[1 - k][2])
+    trials = []
+    for fr in _piece_frames(V, F):
+        near = V[np.linalg.norm(V - fr.nose_tip, axis=1) < radius]
+        P = _samples(near, n_samples, seed=2)
+        for sg in (1, -1):
+            Rt = np.diag([sg, sg, 1.0]) @ fr.R           # flip up (and left, to stay right-handed)
+            # target -> frame coords (origin at the nose tip) -> template coords
+            R0 = tf.R.T @ Rt
+            t0 = tf.nose_tip - R0 @ fr.nose_tip
+            trials.append((rigid_icp(P, model.neutral, model.triangles, R0, t0, iters=quick), fr, P))
+    order = np.argsort([tr[0][2] for tr in trials])[:FULL_ICP]
+    full = [(rigid_icp(P, model.neutral, model.triangles, *trials[k][0][:2]), trials[k][1])
+            for k in order for P in [trials[k][2]]]
+    full.sort(key=lambda f: f[0][2])
+    (R, t, med), fr = full[0]
+    fr = refine_frame(V, F, fr, shell_inertia(V, F)[0])
+    return Alignment(R, t, med, fr, full[1][0][2] if len(full) > 1 else np.inf)

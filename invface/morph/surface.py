@@ -16,10 +16,12 @@
    other cavities, which the paper's shrink-wrapped targets do not have) and those in the
    ear boxes (sec. 9.1) are not snapped onto; template vertices inside an ear box do not
    snap. The template's eye and lip slits, mapped onto a scan's open eyes and parted lips
-   (openings.py), are Dirichlet data of step 1 and keep their rim positions.
+   (openings.py), are Dirichlet data of step 1 and keep their rim positions; where the scan's
+   eyes or lips are closed, the slit's two sides are held together on the scan (seams).
 3. Inverted triangles (normal against the target's interpolated normal) are grown into a
    region (two rings), relaxed with zero-length springs holding the region's boundary, and
-   resnapped; repeated a few times.
+   resnapped; repeated a few times. Folds left after that, with a ring around them, are not
+   snapped (the fill of step 4 takes them).
 4. Partial targets (sec. 8.1): template vertices with no target under them (closest target
    point on the target's boundary, or farther than a tolerance) are not snapped; a second
    Poisson solve with the snapped vertices as Dirichlet data fills them in smoothly.
@@ -199,14 +201,17 @@ def in_boxes(P, boxes):
     return inside
 
 
-def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), relax_rounds=4, progress=None):
+def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), seams=None, relax_rounds=4,
+                  progress=None):
     """Morph the template skin (Vt (n,3), Ft) onto the aligned target (Vg, Fg) using matched
     curve pairs (``curves_t`` on the template, ``curves_g`` on the target) and, optionally,
     ``rims`` = (template vertex ids (k,), their positions (k,3) on the target's eye and lip
     openings) from openings.map_openings: Dirichlet data of the Poisson morph that the snap
     keeps; curve vertices within two rings of them are left to the rims. ``no_snap``: boxes
     (k,2,3) (the scan's ears, sec. 9.1) where no target triangle is snapped onto and no
-    template vertex snaps; the Poisson fill closes them. Returns SurfaceMorph."""
+    template vertex snaps; the Poisson fill closes them. ``seams`` (P,2): template vertex
+    pairs held together (closed slits, openings.closed_seams): each pair goes to the target
+    point nearest its Poisson-morphed midpoint, as a rim would. Returns SurfaceMorph."""
     say = progress or (lambda m: None)
     edge = float(np.median(np.linalg.norm(Vt[Ft[:, 0]] - Vt[Ft[:, 1]], axis=1)))
     ids, disp = curve_dirichlet(Vt, curves_t, curves_g, tol=0.6 * edge)
@@ -219,6 +224,18 @@ def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), rel
     say(f"surface Poisson: {len(ids)} curve and rim vertices as Dirichlet data")
     solver = SurfacePoisson(Vt, Ft)
     Vm = Vt + solver.solve(ids, disp)
+    if seams is not None and len(seams):
+        # closed slits: both sides on the target point nearest their midpoint, then the
+        # Poisson morph again with them as Dirichlet data
+        stri, sw, _ = closest_points(0.5 * (Vm[seams[:, 0]] + Vm[seams[:, 1]]), Vg, Fg)
+        spos = barycentric_points(Vg, Fg, stri, sw)
+        sid = seams.T.ravel()
+        rid, rpos = np.concatenate([rid, sid]), np.concatenate([rpos, spos, spos])
+        rtri, rw = np.concatenate([rtri, stri, stri]), np.concatenate([rw, sw, sw])
+        keep = ~np.isin(ids, sid)
+        ids, disp = np.concatenate([ids[keep], sid]), np.concatenate([disp[keep], np.concatenate([spos, spos]) - Vt[sid]])
+        say(f"{len(seams)} closed-slit vertex pairs held together on the target")
+        Vm = Vt + solver.solve(ids, disp)
 
     Nt = vertex_normals(Vt, Ft)
     boxes = np.reshape(no_snap, (-1, 2, 3))
@@ -245,6 +262,12 @@ def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), rel
         tri = np.where(region, tri2, tri)
         w = np.where(region[:, None], w2, w)
         bad = inverted_triangles(np.where(ok[:, None], Vs, Vm), Ft, Vg, Fg) & ok[Ft].all(1)
+    if bad.any():
+        # folds the relaxation could not undo (a template ala snapped into a scan's nostril):
+        # their vertices, and a ring around them, are left to the Poisson fill
+        fold = _rings(Ft, np.unique(Ft[bad]), len(Vt), 1) & ~np.isin(np.arange(len(Vt)), rid)
+        ok &= ~fold
+        say(f"{int(bad.sum())} triangles still folded: {int(fold.sum())} vertices around them left to the fill")
     if not ok.all():
         say(f"{int((~ok).sum())} template vertices off the target: filled by a second Poisson solve")
         fixed = np.flatnonzero(ok)

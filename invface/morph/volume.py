@@ -86,11 +86,12 @@ def _bad_tets(X, tets, min_radius_ratio):
     return (signed_volumes(X, tets) <= 0) | (radius_ratio(X, tets) < min_radius_ratio)
 
 
-def relax_tets(X, X0, tets, held, min_radius_ratio, rounds=4, rings=2):
+def relax_tets(X, X0, tets, held, min_radius_ratio, rounds=6, rings=2, release=2):
     """Untangle and re-shape the tets around bad ones (inverted or below the radius-ratio
     bound): the non-held vertices within ``rings`` (growing each round) of a bad tet minimise
     the regularised mean-ratio distortion against the template's rest tets X0 (mesh.untangle);
-    in the last round the held (skin, bone) vertices of tets still bad are released as well.
+    in the last ``release`` rounds the held (skin, bone) vertices of tets still bad are
+    released as well (a fold the surface morph left in the skin has no good tets under it).
     Returns X (N,3), vertices moved (int), rounds run (int)."""
     N = len(X)
     moved = np.zeros(N, bool)
@@ -102,7 +103,7 @@ def relax_tets(X, X0, tets, held, min_radius_ratio, rounds=4, rings=2):
         region[np.unique(tets[bad])] = True
         for _ in range(rings + r):
             region[np.unique(tets[region[tets].any(1)])] = True
-        if r == rounds - 1:           # last resort: release the skin/bone vertices of bad tets too
+        if r >= rounds - release:     # last resort: release the skin/bone vertices of bad tets too
             held = held.copy()
             held[np.unique(tets[bad])] = False
         free = np.flatnonzero(region & ~held)
@@ -184,6 +185,12 @@ def morph_volume(model, surface_displacement, min_radius_ratio, progress=None):
         say(f"relaxing {n_bad} inverted or low-quality tets")
         X, moved, rounds = relax_tets(X, model.rest_positions, model.tets, held, min_radius_ratio)
     bad = _bad_tets(X, model.tets, DEGENERATE)
+    if bad.any():           # a last, wider pass: four rings around them, everything released
+        say(f"{int(bad.sum())} tets still flat: relaxing a wider region")
+        X, more, r2 = relax_tets(X, model.rest_positions, model.tets, held, min_radius_ratio, rounds=4, rings=4,
+                                 release=4)
+        moved, rounds = moved + more, rounds + r2
+        bad = _bad_tets(X, model.tets, DEGENERATE)
     if bad.any():
         raise MeshError(f"the morphed flesh has {int(bad.sum())} inverted or flattened tets (radius ratio "
                         f"under {DEGENERATE}) after relaxation: the target is too far from the template's "

@@ -58,11 +58,15 @@ class ModelBuild:
         lines = []
         st = self.stats
         if st:
-            lines += [f"scan unit {st['unit']} (x{st['scale']:g} to metres); symmetry error "
-                      f"{st['symmetry_error_mm']:.2f} mm; alignment residual {st['alignment_residual_mm']:.2f} mm",
-                      f"skin to scan: mean {st['surface_to_target_mm']['mean']:.3f} mm, max "
-                      f"{st['surface_to_target_mm']['max']:.2f} mm; {100 * st['snapped_fraction']:.1f}% of the "
-                      "template skin on the scan"]
+            lines.append(f"scan {st.get('unit_summary', 'unit ' + st['unit'])} (x{st['scale']:g} to metres); "
+                         f"symmetry error {st['symmetry_error_mm']:.2f} mm; alignment residual "
+                         f"{st['alignment_residual_mm']:.2f} mm")
+            f = st.get("face_to_scan_mm")          # bundles built before issue 27 lack it
+            if f:
+                lines.append(f"face skin to scan: median {f['median']:.2f} mm, 95th percentile {f['p95']:.2f} mm, "
+                             f"max {f['max']:.2f} mm; {100 * st['snapped_fraction']:.1f}% of the template skin "
+                             "snapped onto the scan")
+            lines += [f"cleaning: {n}" for n in st.get("cleaning", [])]
         s = self.model.summary()
         lines += [f"surface: {s['surface_vertices']} vertices, {s['surface_triangles']} triangles; "
                   f"blendshapes: {s['blendshapes']}; skin embedding: {s['skin_embedding']}",

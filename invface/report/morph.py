@@ -3,6 +3,7 @@
 Row 1: the aligned target with its landmarks (red) and feature curves (blue), front and 3/4.
 Row 2: the template with its landmarks and curves, the same views.
 Row 3: the morphed skin; row 4: skin with the morphed muscles; row 5: the morphed bones.
+When the build stops, ``write_failure_preview`` draws the scan with what was found.
 """
 from __future__ import annotations
 
@@ -56,3 +57,30 @@ def write_morph_preview(model, result, folder, template=None, size=420, spp=12):
     plt.imsave(tmp, np.concatenate(images, 0))
     os.replace(tmp, sheet)
     return sheet
+
+
+def write_failure_preview(found, folder, size=420, spp=12):
+    """When the builder stopped (morph.build.BuildFailed.found): the aligned scan with the
+    landmarks and curves found by then, front and 3/4, as ``failed_build.png`` in ``folder``.
+    Returns its path, or None when the scan was never aligned."""
+    import matplotlib.pyplot as plt
+
+    if found.get("aligned") is None:
+        return None
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    V, F = found["aligned"], found["target"].faces
+    meshes = [(V, F, GREY)]
+    if found.get("landmarks"):
+        meshes.append(_dots(list(found["landmarks"].values()), 0.0022, (0.9, 0.1, 0.1)))
+    if found.get("curves"):
+        meshes.append(_dots(np.concatenate(list(found["curves"].values())), 0.0008, (0.1, 0.3, 0.95)))
+    row = []
+    for eye in VIEWS.values():
+        cam = look_at_camera(np.array(eye), (0.0, 0.02, 0.04), fov=30, width=size, height=size, spp=spp)
+        row.append(to_srgb8(render_meshes(meshes, cam)))
+    path = folder / "failed_build.png"
+    tmp = folder / "failed_build.tmp.png"
+    plt.imsave(tmp, np.concatenate(row, 1))
+    os.replace(tmp, path)
+    return path

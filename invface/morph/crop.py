@@ -1,0 +1,54 @@
+"""Crop what is not head from an aligned scan: shoulders, chest, clothing, a stand, the back
+of a bust (issue 27).
+
+The template covers the face, the forehead and scalp to the crown, the sides of the head to
+the ears and the neck to 2 cm below the chin. A scan's surface far outside that region has
+nothing to morph onto, yet it decides the scan's inertia axes, its profile's lowest point and
+its head extremes. Once the template's face is aligned (``orient``) and its similarity to the
+scan is known (``landmarks.face_similarity``: A, t), the scan is cut to the template's box,
+carried by that similarity and grown by ``MARGIN`` (hair, a larger head); of the pieces left,
+the one holding the nose is kept, with any other of at least ``PIECE_SHARE`` of its area (a
+face scanned in several pieces).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..mesh.triangles import edge_components, triangle_areas
+from .target import drop_faces
+
+MARGIN = 0.035       # m around the template's box (template frame)
+BELOW_CHIN = 0.05    # m: the neck is kept this far below the template's chin
+PIECE_SHARE = 0.1    # pieces in the box with less area than this share of the head's go
+
+
+def head_box(template):
+    """(lo (3,), hi (3,)) m: the template skin's box grown by MARGIN, the neck kept to
+    BELOW_CHIN under the chin, in the template's frame."""
+    V = template.neutral
+    lo, hi = V.min(0) - MARGIN, V.max(0) + MARGIN
+    lo[1] = V[template.landmarks["chin"], 1] - BELOW_CHIN
+    hi[2] = np.inf                                      # nothing in front of a face is cut
+    return lo, hi
+
+
+def crop_to_head(target, Va, template, A, t):
+    """The Target without the triangles outside the head: target (its Va (n,3) the aligned
+    vertices in the model frame), A (3,3), t (3,) the similarity mapping the template's face
+    onto it. Returns (Target, kept triangles (f,) bool), with a note when anything was cut."""
+    lo, hi = head_box(template)
+    q = np.linalg.solve(A, (Va[target.faces].mean(1) - t).T).T       # centroids, template frame
+    keep = ((q >= lo) & (q <= hi)).all(1)
+    if keep.any():
+        # of the pieces left in the box, the nose's and those at least PIECE_SHARE of its area
+        F = target.faces[keep]
+        comp = edge_components(F[:, [0, 1, 1, 2]], len(Va))[F[:, 0]]
+        area = np.bincount(comp, weights=triangle_areas(Va, F))
+        nose = A @ template.neutral[template.landmarks["nose_tip"]] + t
+        head = comp[np.argmin(np.linalg.norm(Va[F].mean(1) - nose, axis=1))]
+        keep[np.flatnonzero(keep)[area[comp] < PIECE_SHARE * area[head]]] = False
+    if keep.all():
+        return target, keep
+    cut = drop_faces(target, ~keep, f"cropped {int((~keep).sum())} triangles outside the head "
+                                     "(shoulders, chest, a stand, the back of a bust or pieces apart from the face)")
+    return cut, keep

@@ -1,0 +1,115 @@
+"""A scan's unit and scale, decided by its face, not by its bounding box (issue 27).
+
+A bounding box measures whatever the scan holds: a bust's shoulders, a crown, a stand, a
+stray piece. The face does not vary so much: adult faces are within about 15 % of each
+other in size. So the builder first guesses a provisional scale from the box
+(``provisional_scales``), aligns the template's face to the scan (``orient``), and measures
+the scan's face against the template's by the similarity ICP of the face around the nose
+(``landmarks.face_similarity``: scale sigma). The scan is rescaled by 1/sigma and aligned
+again until sigma is within 5 % of 1. Then:
+
+- if the metres per file unit so found are within a factor ``UNIT_TOLERANCE`` of metres,
+  centimetres or millimetres, that is the file's unit, taken exactly (a face 15 % larger
+  than the template's stays 15 % larger);
+- otherwise the file has no physical unit (a photogrammetry reconstruction, a sculpt): it is
+  scaled to the template's adult face, and the summary says so.
+
+The model stays metric either way; ``model.scan_transform`` holds the scale.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..errors import MeshError
+from .orient import align_to_template
+from .target import UNITS, provisional_scales
+
+UNIT_TOLERANCE = 1.35         # metres per unit within this factor of a unit: that unit
+SCALE_SETTLED = 1.05          # the face's scale against the template's: done within 5 %
+MAX_PASSES = 4
+GOOD_RESIDUAL = 0.005         # m: a face this close to the template's needs no other guess
+
+
+@dataclass
+class Scaling:
+    """How the scan's unit was decided: unit ('m', 'cm', 'mm' or 'none'), scale (metres per
+    file unit), face_scale (the scan's face against the template's, after the choice), the
+    provisional guess it started from and a one-line ``summary``."""
+    unit: str
+    scale: float
+    face_scale: float
+    provisional: str
+    summary: str
+
+
+def rescale(target, k):
+    """The Target with its vertices (and metres per unit) multiplied by k."""
+    return replace(target, vertices=target.vertices * k, scale=target.scale * k)
+
+
+def _face_scale(template, target, al):
+    from .landmarks import face_similarity
+    A, _ = face_similarity(template, al.apply(target.vertices), target.faces)
+    return float(np.cbrt(np.linalg.det(A)))
+
+
+def _settle(target, template):
+    """Align and rescale until the face matches the template's size: (target, alignment,
+    sigma) with sigma the last measured face scale."""
+    for _ in range(MAX_PASSES):
+        al = align_to_template(target.vertices, target.faces, template)
+        sigma = _face_scale(template, target, al)
+        if not 0.2 < sigma < 5:
+            raise MeshError(f"the template's face matches the scan only at {sigma:.2f} times its size")
+        if abs(np.log(sigma)) < np.log(SCALE_SETTLED):
+            break
+        target = rescale(target, 1 / sigma)
+    return target, al, sigma
+
+
+def settle_unit(target, template, unit=None, progress=None):
+    """Decide the unit of a cleaned Target (``target.clean`` with no unit: in provisional
+    metres) from its face and align it. Returns (Target in metres, orient.Alignment, Scaling).
+
+    unit: 'm', 'cm' or 'mm' given by the user (then only aligned)."""
+    say = progress or (lambda m: None)
+    if unit is not None:
+        al = align_to_template(target.vertices, target.faces, template)
+        return target, al, Scaling(unit, target.scale, _face_scale(template, target, al), unit,
+                                   f"unit {unit} (given)")
+    raw = target.vertices / target.scale
+    tried, errors = [], []
+    for guess, s in provisional_scales(raw):
+        t = rescale(target, s / target.scale)
+        try:
+            if guess != "none":          # a unit the box allows: kept when the face agrees
+                al = align_to_template(t.vertices, t.faces, template)
+                sigma = _face_scale(template, t, al)
+                if al.residual < 0.01 and abs(np.log(sigma)) < np.log(UNIT_TOLERANCE):
+                    tried = [(al.residual, guess, t, al, sigma)]
+                    break
+            t, al, sigma = _settle(t, template)
+        except MeshError as e:
+            errors.append(f"as {guess}: {e}")
+            continue
+        tried.append((al.residual, guess, t, al, sigma))
+        if al.residual < GOOD_RESIDUAL:
+            break
+    if not tried:
+        raise MeshError(f"{target.name}: no face found at any scale ({'; '.join(errors)})")
+    _, guess, t, al, sigma = min(tried, key=lambda r: r[0])
+    per_unit = t.scale
+    unit = next((u for u, s in UNITS.items() if abs(np.log(per_unit / s)) < np.log(UNIT_TOLERANCE)), "none")
+    if unit == "none":
+        summary = (f"no physical unit: its face is {per_unit * 1000:.4g} mm per file unit at the template's "
+                   "adult size, so it was scaled to that")
+    else:
+        if per_unit != UNITS[unit]:
+            t = rescale(t, UNITS[unit] / per_unit)
+            al = align_to_template(t.vertices, t.faces, template)
+            sigma = _face_scale(template, t, al)
+        summary = f"unit {unit}, found from the face (its face is {sigma:.2f} x the template's)"
+    say(summary)
+    return t, al, Scaling(unit, t.scale, sigma, guess, summary)
