@@ -408,6 +408,12 @@ def _difficult_scan(tpl, kind):
         ids = rng.choice(np.flatnonzero(X[:, 2] > 0.05), 10, replace=False)
         d = X[ids] - X.mean(0)
         Y[ids] += 0.3 / unit * d / np.linalg.norm(d, axis=1, keepdims=True)
+    if kind == "crown":              # a crown over the scalp (Nefertiti's): a cylinder 14 cm across
+        top = X[tpl.landmarks["top_of_head"]]
+        c = trimesh.creation.cylinder(radius=0.07, height=0.12, sections=48).subdivide().subdivide()
+        C = c.vertices @ np.array([[1, 0, 0], [0, 0, 1], [0, 1, 0.0]]) + top + np.array([0, 0.04, -0.01])
+        Y = np.concatenate([Y, C / unit])
+        F = np.concatenate([F, c.faces + len(X)])
     if kind == "second_piece":       # a ball apart from the head, a quarter of its size
         s = trimesh.creation.icosphere(3, radius=0.05 / unit)
         Y = np.concatenate([Y, s.vertices + Y.mean(0) + np.array([0.2, 0, 0]) / unit])
@@ -415,10 +421,10 @@ def _difficult_scan(tpl, kind):
     return Y, F, unit, X
 
 
-@pytest.mark.parametrize("kind", ["bust", "spikes", "holes", "second_piece", "no_unit"])
+@pytest.mark.parametrize("kind", ["bust", "crown", "spikes", "holes", "second_piece", "no_unit"])
 def test_real_scan_difficulties_build(kind, small_expressive_model):
-    """Issue 27: a template identity with shoulders (a torso larger than the head), ten
-    300 mm spikes, holes, a second piece, or no unit builds with no inverted tet and the
+    """Issue 27: a template identity with shoulders (a torso larger than the head), a crown,
+    ten 300 mm spikes, holes, a second piece, or no unit builds with no inverted tet and the
     sharp landmarks within 3 mm of the known ones; the unit comes from the face."""
     tpl = small_expressive_model
     Y, F, unit, X = _difficult_scan(tpl, kind)
