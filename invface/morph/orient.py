@@ -33,7 +33,7 @@ from ..mesh.sections import arc_length, plane_sections, resample
 from ..mesh.triangles import edge_components, triangle_areas
 
 NOSE_ARC = 0.015         # m along the profile either side of a nose-tip candidate
-MAX_NOSE_ANGLE_DEG = 135
+MAX_NOSE_ANGLE_DEG = 150      # a blunt or hole-broken nose still counts; the template alignment chooses
 NOSE_CANDIDATES = 8      # profile wedges tried as the nose tip
 FULL_ICP = 3             # of the candidate poses after a quick ICP, the best refined fully
 HEAD_REACH = 0.12        # m: the head around a nose tip (its centroid sets "forward")
