@@ -80,6 +80,7 @@ def settle_unit(target, template, unit=None, progress=None):
         return target, al, Scaling(unit, target.scale, _face_scale(template, target, al), unit,
                                    f"unit {unit} (given)")
     raw = target.vertices / target.scale
+    diag = float(np.linalg.norm(np.ptp(raw, axis=0)))
     tried, errors = [], []
     for guess, s in provisional_scales(raw):
         t = rescale(target, s / target.scale)
@@ -92,13 +93,14 @@ def settle_unit(target, template, unit=None, progress=None):
                     break
             t, al, sigma = _settle(t, template)
         except MeshError as e:
-            errors.append(f"as {guess}: {e}")
+            errors.append((guess if guess != "none" else f"no unit at {s * diag:.2g} m across", str(e)))
             continue
         tried.append((al.residual, guess, t, al, sigma))
         if al.residual < GOOD_RESIDUAL:
             break
     if not tried:
-        raise MeshError(f"{target.name}: no face found at any scale ({'; '.join(errors)})")
+        raise MeshError(f"{target.name}: no face found at any scale tried ({', '.join(g for g, _ in errors)}); "
+                        f"at the first: {errors[0][1]}")
     _, guess, t, al, sigma = min(tried, key=lambda r: r[0])
     per_unit = t.scale
     unit = next((u for u, s in UNITS.items() if abs(np.log(per_unit / s)) < np.log(UNIT_TOLERANCE)), "none")
