@@ -162,7 +162,7 @@ def test_fit_plate_on_a_folder_fits_the_frames_and_writes_the_sequence_page(smal
     write_sample_plates(m, tmp_path / "shot", names=["neutral", "smile_blendshape"], size=(320, 240))
     out = tmp_path / "out"
     r = run("fit-plate", str(tmp_path / "shot"), "--calib", str(tmp_path / "calib.npz"),
-            "--resolution", str(SMALL_RESOLUTION), "--iterations", "5", "--curve-lambda", "400", "-o", str(out))
+            "--resolution", str(SMALL_RESOLUTION), "--iterations", "8", "--curve-lambda", "400", "-o", str(out))
     assert r.returncode == 0, r.stderr
     fits = {f: json.loads((out / f / "blendshape" / "fit.json").read_text()) for f in ("neutral", "smile_blendshape")}
     w = {f: s["weights"]["lipCornerPull_L"] for f, s in fits.items()}
