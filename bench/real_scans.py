@@ -73,21 +73,14 @@ def run(name, source, template, expressions, annotated=None):
     return row, model, res
 
 
-def contact_sheet(built, template, path, size=300):
+def contact_sheet(built, path, size=300):
     """One row per build: the scan with its landmarks and curves, the neutral; front and 3/4."""
     import matplotlib.pyplot as plt
-    from invface.render.preview import look_at_camera, render_meshes, to_srgb8
-    from invface.report.morph import GREY, _marked
-    from invface.report.preview import VIEWS, scenes
-    rows = []
-    for name, model, res in built:
-        tiles = []
-        for meshes in (_marked(res.aligned, res.target.faces, res.landmarks, res.curves, GREY), scenes(model)["skin"]):
-            for eye in VIEWS.values():
-                cam = look_at_camera(np.array(eye), (0.0, 0.02, 0.04), fov=30, width=size, height=size, spp=8)
-                tiles.append(to_srgb8(render_meshes(meshes, cam)))
-        row = np.concatenate(tiles, 1)
-        rows.append(row)
+    from invface.report.morph import GREY, _marked, render_row
+    from invface.report.preview import scenes
+    rows = [np.concatenate([render_row(_marked(res.aligned, res.target.faces, res.landmarks, res.curves, GREY), size, 8),
+                            render_row(scenes(model)["skin"], size, 8)], 1)
+            for _, model, res in built]
     fig_h = len(rows) * size / 100
     fig, axes = plt.subplots(len(rows), 1, figsize=(4 * size / 100, fig_h), squeeze=False)
     for ax, row, (name, _, _) in zip(axes[:, 0], rows, built):
@@ -136,7 +129,7 @@ def main():
         print(f"ICT landmarks over {len(lms)} points: median {np.median(lms):.2f} mm, max {max(lms):.2f} mm")
     if built:
         path = Path(args.out) / "contact_sheet.png"
-        contact_sheet(built, template, path)
+        contact_sheet(built, path)
         print(f"wrote {path}")
 
 

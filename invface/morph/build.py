@@ -33,7 +33,7 @@ from .blendshapes import read_blendshapes, recognised
 from .jaw import split_jaw
 from .curves import curve_set
 from .crop import crop_to_head
-from .landmarks import ear_boxes, face_similarity, find_landmarks, template_landmarks
+from .landmarks import ear_boxes, find_landmarks, template_landmarks
 from .openings import ACROSS, MAX_INNER_FRACTION, closed_seams, inner_surfaces, map_openings, opening_centres
 from .surface import SurfacePoisson, morph_surface
 from .target import Target, clean, drop_faces
@@ -209,9 +209,9 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
         raise MeshError(f"{target.name}: after alignment the scan lies {al.residual * 1000:.1f} mm (median) from "
                         "the template's face; it does not look like a face, or too little of one")
     target = replace(target, unit=scaling.unit)
-    target, _ = crop_to_head(target, al.apply(target.vertices), template,
-                             *face_similarity(template, al.apply(target.vertices), target.faces))
-    if target.notes and target.notes[-1].startswith("cropped"):
+    cropped = crop_to_head(target, al.apply(target.vertices), template, *scaling.similarity)
+    if cropped is not target:
+        target = cropped
         say(target.notes[-1])
     TL = template_landmarks(template)
     inner = inner_surfaces(al.apply(target.vertices), target.faces, opening_centres(TL))

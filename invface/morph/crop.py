@@ -35,7 +35,7 @@ def head_box(template):
 def crop_to_head(target, Va, template, A, t):
     """The Target without the triangles outside the head: target (its Va (n,3) the aligned
     vertices in the model frame), A (3,3), t (3,) the similarity mapping the template's face
-    onto it. Returns (Target, kept triangles (f,) bool), with a note when anything was cut."""
+    onto it. Returns the cropped Target with a note, or ``target`` itself when nothing was cut."""
     lo, hi = head_box(template)
     q = np.linalg.solve(A, (Va[target.faces].mean(1) - t).T).T       # centroids, template frame
     keep = ((q >= lo) & (q <= hi)).all(1)
@@ -48,7 +48,6 @@ def crop_to_head(target, Va, template, A, t):
         head = comp[np.argmin(np.linalg.norm(Va[F].mean(1) - nose, axis=1))]
         keep[np.flatnonzero(keep)[area[comp] < PIECE_SHARE * area[head]]] = False
     if keep.all():
-        return target, keep
-    cut = drop_faces(target, ~keep, f"cropped {int((~keep).sum())} triangles outside the head "
+        return target
+    return drop_faces(target, ~keep, f"cropped {int((~keep).sum())} triangles outside the head "
                                      "(shoulders, chest, a stand, the back of a bust or pieces apart from the face)")
-    return cut, keep

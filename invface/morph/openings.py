@@ -16,9 +16,11 @@ lid lines, not holes at the back of the inner lips.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..mesh.sections import arc_length, resample, walk_chains
-from ..mesh.triangles import boundary_edges, boundary_loops, covered_from_front, edge_components, unique_edges
+from ..mesh.triangles import (boundary_edges, boundary_loops, boundary_vertices, covered_from_front,
+                              edge_components, unique_edges)
 
 # the openings and the landmarks at their ends
 OPENINGS = {"eye_L": ("eye_inner_L", "eye_outer_L"), "eye_R": ("eye_inner_R", "eye_outer_R"),
@@ -144,8 +146,7 @@ def closed_seams(Vt, Ft, TL, Vg, Fg, L, opened=(), tol=1e-7, reach=OPENING_REACH
     sides of the slit find different walls of the lip or lid line's groove and the slit tears
     open (15 mm at the mouth of a bust, issue 27). ``surface.morph_surface`` holds each pair
     together on the scan instead."""
-    from scipy.spatial import cKDTree
-    b = np.flatnonzero(np.bincount(boundary_edges(Ft).ravel(), minlength=len(Vt)))
+    b = np.flatnonzero(boundary_vertices(Ft, len(Vt)))
     pairs = np.array(sorted(cKDTree(Vt[b]).query_pairs(tol)), np.int64).reshape(-1, 2)
     pairs = b[pairs]
     if not len(pairs):

@@ -115,13 +115,12 @@ def _nose_scores(P, c):
     return out
 
 
-def _face_frame(V, F, c, n_sym, err, tip, refine, n_samples):
-    """The Frame whose nose tip is ``tip`` (3,) on the profile of the plane (c, n_sym)."""
+def _face_frame(V, F, c, n_sym, err, tip, refine, n_samples, cen, area):
+    """The Frame whose nose tip is ``tip`` (3,) on the profile of the plane (c, n_sym); cen
+    (f,3), area (f,): the triangles' centroids and areas."""
     # forward: from the centroid of the head around the tip (a bust's or a torso's centre of
     # mass lies low in the chest, and its direction to the nose tip would tilt the face up)
-    cen = V[F].mean(1)
     head = np.linalg.norm(cen - tip, axis=1) < HEAD_REACH
-    area = triangle_areas(V, F)
     ch = np.average(cen[head], axis=0, weights=area[head]) if area[head].sum() > 0 else c
     f = tip - ch
     f -= (f @ n_sym) * n_sym
@@ -207,7 +206,8 @@ def find_frames(V, F, n_samples=1500, refine=True, candidates=NOSE_CANDIDATES):
         raise MeshError(f"no nose found: the sharpest point of the profile opens {np.degrees(cands[0][1]):.0f} "
                         f"degrees (a nose tip: under {MAX_NOSE_ANGLE_DEG} degrees); the mesh does not look like a face")
     tips = [p for p, a in cands if a <= np.radians(MAX_NOSE_ANGLE_DEG)][:candidates]
-    return [_face_frame(V, F, c, n_sym, min(errs), tip, refine, n_samples) for tip in tips]
+    cen, area = V[F].mean(1), triangle_areas(V, F)
+    return [_face_frame(V, F, c, n_sym, min(errs), tip, refine, n_samples, cen, area) for tip in tips]
 
 
 def find_frame(V, F, n_samples=1500, refine=True):

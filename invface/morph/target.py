@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import MeshError
-from ..mesh.triangles import edge_components, face_normals, triangle_areas
+from ..mesh.triangles import edge_components, face_normals, triangle_areas, umbrella, unique_edges
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 HEAD_SIZE_M = (0.12, 0.6)        # bounding-box diagonal of a face or head, metres
@@ -78,7 +78,6 @@ def spike_vertices(V, F, ratio=SPIKE_RATIO, rounds=3):
     length of a vertex is the mean over its neighbours of their shortest edge, which a spike's
     own long edges do not enter. Repeated ``rounds`` times with the spikes' triangles left
     out (a spike of several vertices loses its tip first). Scale-free: V in any unit."""
-    from ..mesh.triangles import umbrella, unique_edges
     out = np.zeros(len(V), bool)
     for _ in range(rounds):
         Fk = F[~out[F].any(1)]

@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import MeshError
+from .landmarks import face_similarity
 from .orient import align_to_template
 from .target import UNITS, provisional_scales
 
@@ -36,12 +37,14 @@ GOOD_RESIDUAL = 0.005         # m: a face this close to the template's needs no 
 class Scaling:
     """How the scan's unit was decided: unit ('m', 'cm', 'mm' or 'none'), scale (metres per
     file unit), face_scale (the scan's face against the template's, after the choice), the
-    provisional guess it started from and a one-line ``summary``."""
+    provisional guess it started from, a one-line ``summary`` and ``similarity`` (A (3,3),
+    t (3,)): the template's face mapped onto the aligned scan (landmarks.face_similarity)."""
     unit: str
     scale: float
     face_scale: float
     provisional: str
     summary: str
+    similarity: tuple
 
 
 def rescale(target, k):
@@ -49,24 +52,27 @@ def rescale(target, k):
     return replace(target, vertices=target.vertices * k, scale=target.scale * k)
 
 
-def _face_scale(template, target, al):
-    from .landmarks import face_similarity
-    A, _ = face_similarity(template, al.apply(target.vertices), target.faces)
-    return float(np.cbrt(np.linalg.det(A)))
+def _measure(target, template):
+    """Align the target and measure its face: (Alignment, sigma = the face's scale against
+    the template's, the similarity (A (3,3), t (3,)) of the template's face onto it)."""
+    al = align_to_template(target.vertices, target.faces, template)
+    A, t = face_similarity(template, al.apply(target.vertices), target.faces)
+    return al, float(np.cbrt(np.linalg.det(A))), (A, t)
 
 
-def _settle(target, template):
-    """Align and rescale until the face matches the template's size: (target, alignment,
-    sigma) with sigma the last measured face scale."""
-    for _ in range(MAX_PASSES):
-        al = align_to_template(target.vertices, target.faces, template)
-        sigma = _face_scale(template, target, al)
+def _settle(target, template, first=None):
+    """Rescale and align until the face matches the template's size, from ``first`` (the
+    target's _measure, when done already): (target, its _measure)."""
+    m = first or _measure(target, template)
+    for _ in range(MAX_PASSES - 1):
+        sigma = m[1]
         if not 0.2 < sigma < 5:
             raise MeshError(f"the template's face matches the scan only at {sigma:.2f} times its size")
         if abs(np.log(sigma)) < np.log(SCALE_SETTLED):
             break
         target = rescale(target, 1 / sigma)
-    return target, al, sigma
+        m = _measure(target, template)
+    return target, m
 
 
 def settle_unit(target, template, unit=None, progress=None):
@@ -76,32 +82,31 @@ def settle_unit(target, template, unit=None, progress=None):
     unit: 'm', 'cm' or 'mm' given by the user (then only aligned)."""
     say = progress or (lambda m: None)
     if unit is not None:
-        al = align_to_template(target.vertices, target.faces, template)
-        return target, al, Scaling(unit, target.scale, _face_scale(template, target, al), unit,
-                                   f"unit {unit} (given)")
+        m = _measure(target, template)
+        return target, m[0], Scaling(unit, target.scale, m[1], unit, f"unit {unit} (given)", m[2])
     raw = target.vertices / target.scale
     diag = float(np.linalg.norm(np.ptp(raw, axis=0)))
     tried, errors = [], []
     for guess, s in provisional_scales(raw):
         t = rescale(target, s / target.scale)
         try:
+            m = None
             if guess != "none":          # a unit the box allows: kept when the face agrees
-                al = align_to_template(t.vertices, t.faces, template)
-                sigma = _face_scale(template, t, al)
-                if al.residual < 0.01 and abs(np.log(sigma)) < np.log(UNIT_TOLERANCE):
-                    tried = [(al.residual, guess, t, al, sigma)]
+                m = _measure(t, template)
+                if m[0].residual < 0.01 and abs(np.log(m[1])) < np.log(UNIT_TOLERANCE):
+                    tried = [(m[0].residual, guess, t, m)]
                     break
-            t, al, sigma = _settle(t, template)
+            t, m = _settle(t, template, m)
         except MeshError as e:
             errors.append((guess if guess != "none" else f"no unit at {s * diag:.2g} m across", str(e)))
             continue
-        tried.append((al.residual, guess, t, al, sigma))
-        if al.residual < GOOD_RESIDUAL:
+        tried.append((m[0].residual, guess, t, m))
+        if m[0].residual < GOOD_RESIDUAL:
             break
     if not tried:
         raise MeshError(f"{target.name}: no face found at any scale tried ({', '.join(g for g, _ in errors)}); "
                         f"at the first: {errors[0][1]}")
-    _, guess, t, al, sigma = min(tried, key=lambda r: r[0])
+    _, guess, t, m = min(tried, key=lambda r: r[0])
     per_unit = t.scale
     unit = next((u for u, s in UNITS.items() if abs(np.log(per_unit / s)) < np.log(UNIT_TOLERANCE)), "none")
     if unit == "none":
@@ -110,8 +115,7 @@ def settle_unit(target, template, unit=None, progress=None):
     else:
         if per_unit != UNITS[unit]:
             t = rescale(t, UNITS[unit] / per_unit)
-            al = align_to_template(t.vertices, t.faces, template)
-            sigma = _face_scale(template, t, al)
-        summary = f"unit {unit}, found from the face (its face is {sigma:.2f} x the template's)"
+            m = _measure(t, template)
+        summary = f"unit {unit}, found from the face (its face is {m[1]:.2f} x the template's)"
     say(summary)
-    return t, al, Scaling(unit, t.scale, sigma, guess, summary)
+    return t, m[0], Scaling(unit, t.scale, m[1], guess, summary, m[2])

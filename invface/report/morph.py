@@ -28,9 +28,22 @@ def _dots(points, radius, color):
 
 
 def _marked(V, F, landmarks, curves, color):
-    meshes = [(V, F, color), _dots(list(landmarks.values()), 0.0022, (0.9, 0.1, 0.1))]
-    meshes.append(_dots(np.concatenate(list(curves.values())), 0.0008, (0.1, 0.3, 0.95)))
+    """Preview meshes of a surface with its landmarks (red) and curves (blue), either empty."""
+    meshes = [(V, F, color)]
+    if landmarks:
+        meshes.append(_dots(list(landmarks.values()), 0.0022, (0.9, 0.1, 0.1)))
+    if curves:
+        meshes.append(_dots(np.concatenate(list(curves.values())), 0.0008, (0.1, 0.3, 0.95)))
     return meshes
+
+
+def render_row(meshes, size, spp):
+    """The meshes rendered from each of the preview VIEWS, side by side (size, size * views, 3) uint8."""
+    row = []
+    for eye in VIEWS.values():
+        cam = look_at_camera(np.array(eye), (0.0, 0.02, 0.04), fov=30, width=size, height=size, spp=spp)
+        row.append(to_srgb8(render_meshes(meshes, cam)))
+    return np.concatenate(row, 1)
 
 
 def write_morph_preview(model, result, folder, template=None, size=420, spp=12):
@@ -45,13 +58,7 @@ def write_morph_preview(model, result, folder, template=None, size=420, spp=12):
         rows["template"] = _marked(template.neutral, template.triangles, result.template_landmarks,
                                    result.template_curves, SKIN)
     rows.update({"morphed_skin": sc["skin"], "muscles": sc["skin_muscles"], "bone": sc["bone"]})
-    images = []
-    for name, meshes in rows.items():
-        row = []
-        for view, eye in VIEWS.items():
-            cam = look_at_camera(np.array(eye), (0.0, 0.02, 0.04), fov=30, width=size, height=size, spp=spp)
-            row.append(to_srgb8(render_meshes(meshes, cam)))
-        images.append(np.concatenate(row, 1))
+    images = [render_row(meshes, size, spp) for meshes in rows.values()]
     sheet = folder / "morph_sheet.png"
     tmp = folder / "morph_sheet.tmp.png"
     plt.imsave(tmp, np.concatenate(images, 0))
@@ -69,18 +76,9 @@ def write_failure_preview(found, folder, size=420, spp=12):
         return None
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    V, F = found["aligned"], found["target"].faces
-    meshes = [(V, F, GREY)]
-    if found.get("landmarks"):
-        meshes.append(_dots(list(found["landmarks"].values()), 0.0022, (0.9, 0.1, 0.1)))
-    if found.get("curves"):
-        meshes.append(_dots(np.concatenate(list(found["curves"].values())), 0.0008, (0.1, 0.3, 0.95)))
-    row = []
-    for eye in VIEWS.values():
-        cam = look_at_camera(np.array(eye), (0.0, 0.02, 0.04), fov=30, width=size, height=size, spp=spp)
-        row.append(to_srgb8(render_meshes(meshes, cam)))
+    meshes = _marked(found["aligned"], found["target"].faces, found.get("landmarks"), found.get("curves"), GREY)
     path = folder / "failed_build.png"
     tmp = folder / "failed_build.tmp.png"
-    plt.imsave(tmp, np.concatenate(row, 1))
+    plt.imsave(tmp, render_row(meshes, size, spp))
     os.replace(tmp, path)
     return path
