@@ -2,14 +2,15 @@
 
 Pipeline: clean the scan, spikes and stray pieces removed (target.py) -> orientation,
 symmetry and rigid alignment to the template (orient.py), the unit decided from the face
-(units.py), what is not head cropped (crop.py); inner lips and lids behind the openings left
-out (openings.py) ->
+(units.py), what is not head cropped and a scalp hidden by hair or a crown left out (crop.py,
+scalp.py); inner lips and lids behind the openings left out (openings.py) ->
 fixed-stencil curvature and landmarks (curvature.py, landmarks.py) -> feature curves
-(curves.py) -> surface Poisson morph, snapping, inverted-triangle relaxation, partial-scan
-completion (surface.py) -> volumetric morph of flesh, bones,
-muscles, relaxation of bad tets (volume.py) -> blendshapes (imported from the actor's files
-with the jaw's rotation split out of the jaw shapes (jaw.py), or the template's expressions
-re-simulated on the new anatomy, or copied) -> muscle-track precompute (paper 000 Eq. 10-11).
+(curves.py) -> surface Poisson morph, snapping, inverted-triangle relaxation, completion of
+what the scan lacks from the template carried by the face's similarity (surface.py) ->
+volumetric morph of flesh, bones, muscles, relaxation of bad tets (volume.py) -> blendshapes
+(imported from the actor's files with the jaw's rotation split out of the jaw shapes
+(jaw.py), or the template's expressions re-simulated on the new anatomy, or copied) ->
+muscle-track precompute (paper 000 Eq. 10-11).
 
 The new model keeps the template's topology (surface, tets, muscles, landmark and curve ids),
 so everything built for the template (rig, simulation, fitting, reports) works on it; its
@@ -209,10 +210,10 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
         raise MeshError(f"{target.name}: after alignment the scan lies {al.residual * 1000:.1f} mm (median) from "
                         "the template's face; it does not look like a face, or too little of one")
     target = replace(target, unit=scaling.unit)
-    cropped = crop_to_head(target, al.apply(target.vertices), template, *scaling.similarity)
-    if cropped is not target:
-        target = cropped
-        say(target.notes[-1])
+    cropped, hidden = crop_to_head(target, al.apply(target.vertices), template, *scaling.similarity)
+    for note in cropped.notes[len(target.notes):]:
+        say(note)
+    target = cropped
     TL = template_landmarks(template)
     inner = inner_surfaces(al.apply(target.vertices), target.faces, opening_centres(TL))
     if inner.mean() > MAX_INNER_FRACTION:
@@ -249,8 +250,9 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
         Ct, Cg = ({k: c for k, c in C.items() if k not in across} for C in (Ct, Cg))
     ears = ear_boxes(Va, Fg, L)
     seams = closed_seams(template.neutral, template.triangles, TL, Va, Fg, L, opened)
+    As, ts = scaling.similarity
     surf = morph_surface(template.neutral, template.triangles, Va, Fg, Ct, Cg, rims=(rid, rpos), no_snap=ears,
-                         seams=seams, progress=say)
+                         seams=seams, carried=template.neutral @ As.T + ts, progress=say)
     lap("surface")
 
     model, vm = carry_anatomy(template, surf.positions, progress=say)
@@ -297,7 +299,7 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
     q = quality_summary(model.rest_positions, model.tets)
     stats = {
         "unit": target.unit, "scale": target.scale, "unit_summary": scaling.summary,
-        "face_scale": scaling.face_scale, "cleaning": target.notes,
+        "face_scale": scaling.face_scale, "cleaning": target.notes, "hidden_scalp": hidden,
         "symmetry_error_mm": al.frame.symmetry_error * 1000,
         "alignment_residual_mm": al.residual * 1000, "flipped_residual_mm": al.flipped_residual * 1000,
         "landmark_to_morph_mm": {k: float(np.linalg.norm(on_model[k] - L[k]) * 1000) for k in L},

@@ -41,6 +41,7 @@ from ..mesh.tets import graph_laplacian, harmonic
 from ..mesh.triangles import boundary_vertices, face_normals, triangle_areas, unique_edges, vertex_normals
 
 SNAP_DISTANCE = 0.01          # m: farther template vertices are "off the scan" (sec. 8.1)
+CARRY_BAND = 0.03             # m: off-scan vertices farther than this from the scan follow the carried template
 
 
 def fv_laplacian(V, F):
@@ -201,8 +202,8 @@ def in_boxes(P, boxes):
     return inside
 
 
-def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), seams=None, relax_rounds=4,
-                  progress=None):
+def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), seams=None, carried=None,
+                  relax_rounds=4, progress=None):
     """Morph the template skin (Vt (n,3), Ft) onto the aligned target (Vg, Fg) using matched
     curve pairs (``curves_t`` on the template, ``curves_g`` on the target) and, optionally,
     ``rims`` = (template vertex ids (k,), their positions (k,3) on the target's eye and lip
@@ -211,7 +212,11 @@ def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), sea
     (k,2,3) (the scan's ears, sec. 9.1) where no target triangle is snapped onto and no
     template vertex snaps; the Poisson fill closes them. ``seams`` (P,2): template vertex
     pairs held together (closed slits, openings.closed_seams): each pair goes to the target
-    point nearest its Poisson-morphed midpoint, as a rim would. Returns SurfaceMorph."""
+    point nearest its Poisson-morphed midpoint, as a rim would. ``carried`` (n,3): the
+    template skin carried onto the target by the face's similarity; template vertices off the
+    target and more than ``CARRY_BAND`` from any snapped one (the back of a partial scan, a
+    scalp under hair) are held there in the fill, which blends the band between. Returns
+    SurfaceMorph."""
     say = progress or (lambda m: None)
     edge = float(np.median(np.linalg.norm(Vt[Ft[:, 0]] - Vt[Ft[:, 1]], axis=1)))
     ids, disp = curve_dirichlet(Vt, curves_t, curves_g, tol=0.6 * edge)
@@ -270,6 +275,11 @@ def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), sea
         say(f"{int(bad.sum())} triangles still folded: {int(fold.sum())} vertices around them left to the fill")
     if not ok.all():
         say(f"{int((~ok).sum())} template vertices off the target: filled by a second Poisson solve")
-        fixed = np.flatnonzero(ok)
-        Vs = Vt + solver.solve(fixed, (Vs - Vt)[fixed])
+        D, held = np.where(ok[:, None], Vs - Vt, 0.0), ok.copy()
+        if carried is not None:
+            far = ~ok & (cKDTree(Vt[ok]).query(Vt)[0] > CARRY_BAND)
+            D[far], held[far] = carried[far] - Vt[far], True
+            say(f"{int(far.sum())} of them follow the template carried by the face's similarity")
+        fixed = np.flatnonzero(held)
+        Vs = Vt + solver.solve(fixed, D[fixed])
     return SurfaceMorph(Vs, Vm, ok, int(bad.sum()), rounds, len(ids), tri, w)

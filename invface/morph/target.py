@@ -41,6 +41,30 @@ class Target:
     notes: list = field(default_factory=list)
 
 
+def inward_pieces(V, F, convex=0.2):
+    """Boolean (f,) of the triangles (F (f,3) on V (n,3), each piece consistently wound) in
+    pieces whose normals point inwards. A piece's area-weighted normals are compared with the
+    directions from its own centroid when it is clearly curved around it (a head, a bust, a
+    crown: the normalised sum beyond ``convex``), else from the whole scan's (a flat stray
+    patch). (One test over the whole scan turned a head inwards when a crown larger than the
+    head sat on it: their common centroid lay in the crown.)"""
+    fn = face_normals(V, F)
+    c = V[F].mean(1)
+    a = np.linalg.norm(fn, axis=1)
+    comp = edge_components(F[:, [0, 1, 1, 2]], len(V))[F[:, 0]]
+    k = comp.max() + 1
+
+    def outward(centre):                     # (k,) normalised sum of n . (c - centre) per piece
+        d = c - centre
+        return (np.bincount(comp, np.einsum("ij,ij->i", fn, d), k)
+                / np.maximum(np.bincount(comp, a * np.linalg.norm(d, axis=1), k), 1e-30))
+
+    own = np.stack([np.bincount(comp, a * c[:, j], k) for j in range(3)], 1)
+    mine = outward((own / np.maximum(np.bincount(comp, a, k), 1e-30)[:, None])[comp])
+    whole = outward(np.average(c, axis=0, weights=a))
+    return np.where(np.abs(mine) > convex, mine, whole)[comp] < 0
+
+
 def drop_faces(target, drop, note):
     """The Target without the triangles ``drop`` (f,) bool and the vertices only they used;
     ``note`` is added to its notes."""
@@ -168,10 +192,10 @@ def clean(V, F, name="target", unit=None, shapes=None):
     F = np.asarray(mesh.faces, np.int64)
     if (F != flipped_before).any():
         notes.append(f"made the winding consistent ({int((F != flipped_before).any(1).sum())} triangles flipped)")
-    # normals out of the head: area-weighted normals point away from the centroid
-    fn = face_normals(V, F)
-    c = V[F].mean(1)
-    if np.einsum("ij,ij->", fn, c - np.average(c, axis=0, weights=np.linalg.norm(fn, axis=1))) < 0:
-        F = F[:, [0, 2, 1]]
+    flip = inward_pieces(V, F)
+    if flip.all():
         notes.append("flipped all normals to point out of the head")
+    elif flip.any():
+        notes.append(f"flipped the normals of {int(flip.sum())} of {len(F)} triangles (pieces facing inwards)")
+    F = np.where(flip[:, None], F[:, [0, 2, 1]], F)
     return Target(V, F, unit, scale, src, name, notes)

@@ -192,9 +192,14 @@ def morph_volume(model, surface_displacement, min_radius_ratio, progress=None):
         moved, rounds = moved + more, rounds + r2
         bad = _bad_tets(X, model.tets, DEGENERATE)
     if bad.any():
+        c = model.rest_positions[model.tets[bad]].mean(1)
+        names = list(model.landmarks)
+        L = model.neutral[[model.landmarks[k] for k in names]]
+        near = sorted({names[i] for i in np.argmin(np.linalg.norm(c[:, None] - L[None], axis=2), axis=1)})
         raise MeshError(f"the morphed flesh has {int(bad.sum())} inverted or flattened tets (radius ratio "
-                        f"under {DEGENERATE}) after relaxation: the target is too far from the template's "
-                        "proportions (check the landmarks in the --preview sheet)")
+                        f"under {DEGENERATE}) after relaxation, nearest the template's {', '.join(near)}: the "
+                        "target is too far from the template's proportions there (check the landmarks in the "
+                        "--preview sheet)")
     return VolumeMorph(X, pushed, moved, rounds)
 
 
