@@ -47,6 +47,9 @@ def barycentric_points(values, F, tri, w):
     return np.einsum("nk,nkj->nj", w, np.asarray(values)[np.asarray(F)[tri]])
 
 
+CHUNK = 20000       # points per batch
+
+
 def closest_points(points, V, F, k=16):
     """Closest points on the mesh (V (n,3), F (f,3)) to points (P,3).
 
@@ -57,7 +60,15 @@ def closest_points(points, V, F, k=16):
     points = np.asarray(points, float).reshape(-1, 3)
     V, F = np.asarray(V, float), np.asarray(F, np.int64)
     k = min(k, len(F))
-    _, cand = cKDTree(V[F].mean(1)).query(points, k=k)
+    tree = cKDTree(V[F].mean(1))
+    if len(points) > CHUNK:          # k candidates per point: bounded memory on a large scan
+        parts = [_closest(points[i:i + CHUNK], V, F, k, tree) for i in range(0, len(points), CHUNK)]
+        return tuple(np.concatenate(a) for a in zip(*parts))
+    return _closest(points, V, F, k, tree)
+
+
+def _closest(points, V, F, k, tree):
+    _, cand = tree.query(points, k=k)
     cand = cand.reshape(len(points), k).ravel()
     P = np.repeat(points, k, axis=0)
     tri = V[F[cand]]

@@ -47,6 +47,10 @@ def plane_sections(V, F, origin, normal):
     normal = np.asarray(normal, float) / np.linalg.norm(normal)
     d = (V - origin) @ normal
     d = np.where(d == 0, 1e-12, d)
+    side = d[F] > 0
+    F = F[side.any(1) & ~side.all(1)]             # only the triangles the plane cuts
+    if len(F) == 0:
+        return []
     edges, tri_edges = unique_edges(F)
     da, db = d[edges[:, 0]], d[edges[:, 1]]
     crossed = (da * db) < 0

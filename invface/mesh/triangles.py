@@ -88,6 +88,9 @@ def group_offsets(counts):
     return np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
 
 
+PAIRS = 2_000_000     # centroid-triangle pairs per batch (covered_from_front)
+
+
 def covered_from_front(X, faces, eps=1e-6):
     """Boolean (F,) of triangles whose centroid is hidden along +z: a ray from it towards +z
     hits another triangle more than ``eps`` (m) in front. X (N,3) m, faces (F,3).
@@ -114,22 +117,27 @@ def covered_from_front(X, faces, eps=1e-6):
     q = (np.floor(c[:, :2] / h).astype(np.int64) - base)
     qcell = q[:, 0] * ny + q[:, 1]
     start, stop = np.searchsorted(cell, qcell, "left"), np.searchsorted(cell, qcell, "right")
-    n = stop - start
-    pid = np.repeat(np.arange(len(faces)), n)
-    cand = tri[np.repeat(start, n) + group_offsets(n)]
-    keep = cand != pid
-    pid, cand = pid[keep], cand[keep]
-    a, b, d = P[cand, 0], P[cand, 1], P[cand, 2]
-    p = c[pid]
-    e1, e2, r = b[:, :2] - a[:, :2], d[:, :2] - a[:, :2], p[:, :2] - a[:, :2]
-    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    ok = np.abs(det) > 1e-30
-    det = np.where(ok, det, 1.0)
-    u = (r[:, 0] * e2[:, 1] - r[:, 1] * e2[:, 0]) / det
-    v = (e1[:, 0] * r[:, 1] - e1[:, 1] * r[:, 0]) / det
-    inside = ok & (u >= 0) & (v >= 0) & (u + v <= 1)
-    z = a[:, 2] + u * (b[:, 2] - a[:, 2]) + v * (d[:, 2] - a[:, 2])
-    hit = inside & (z > p[:, 2] + eps)
     out = np.zeros(len(faces), bool)
-    out[pid[hit]] = True
+    # in batches of about PAIRS centroid-triangle pairs: a dense scan seen edge-on (the sides
+    # of a head) stacks hundreds of triangles in a cell
+    ends = np.cumsum(stop - start)
+    cuts = np.searchsorted(ends, np.arange(PAIRS, ends[-1] + PAIRS, PAIRS), "right")
+    for i, j in zip(np.r_[0, cuts[:-1]], cuts):
+        ids = np.arange(i, min(j, len(faces)))
+        n = stop[ids] - start[ids]
+        pid = np.repeat(ids, n)
+        cand = tri[np.repeat(start[ids], n) + group_offsets(n)]
+        keep = cand != pid
+        pid, cand = pid[keep], cand[keep]
+        a, b, d = P[cand, 0], P[cand, 1], P[cand, 2]
+        p = c[pid]
+        e1, e2, r = b[:, :2] - a[:, :2], d[:, :2] - a[:, :2], p[:, :2] - a[:, :2]
+        det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        ok = np.abs(det) > 1e-30
+        det = np.where(ok, det, 1.0)
+        u = (r[:, 0] * e2[:, 1] - r[:, 1] * e2[:, 0]) / det
+        v = (e1[:, 0] * r[:, 1] - e1[:, 1] * r[:, 0]) / det
+        inside = ok & (u >= 0) & (v >= 0) & (u + v <= 1)
+        z = a[:, 2] + u * (b[:, 2] - a[:, 2]) + v * (d[:, 2] - a[:, 2])
+        out[pid[inside & (z > p[:, 2] + eps)]] = True
     return out

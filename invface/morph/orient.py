@@ -38,7 +38,8 @@ NOSE_CANDIDATES = 8      # profile wedges tried as the nose tip
 FULL_ICP = 3             # of the candidate poses after a quick ICP, the best refined fully
 HEAD_REACH = 0.12        # m: the head around a nose tip (its centroid sets "forward")
 REFINE_HEIGHT = 0.06     # m: the symmetry plane is refined on the nose and cheeks, this far
-REFINE_DEPTH = 0.075     # above/below and behind the nose tip
+REFINE_DEPTH = 0.075     # above/below and behind the nose tip; their reflections are measured
+REFINE_REACH = 0.03      # against the scan's triangles this much farther out
 
 
 @dataclass
@@ -147,13 +148,17 @@ def refine_frame(V, F, fr, c, n_samples=1500):
     region = V[keep]
     if len(region) > 50:
         region = _samples(region, n_samples, seed=1)
+        # the reflections stay near the region: measured against the triangles around it
+        Lc = (V[F].mean(1) - origin) @ R.T
+        Fr = F[(Lc[:, 2] > tipL[2] - REFINE_DEPTH - REFINE_REACH) & (np.abs(Lc[:, 1] - tipL[1]) < REFINE_HEIGHT
+                                                                      + REFINE_REACH)]
 
         def plane(q):
             a, b, d = q
             n = R[0] + a * R[1] + b * R[2]
             return origin + d * R[0], n / np.linalg.norm(n)
 
-        res = minimize(lambda q: symmetry_error(V, F, region, *plane(q)), np.zeros(3),
+        res = minimize(lambda q: symmetry_error(V, Fr, region, *plane(q)), np.zeros(3),
                        method="Nelder-Mead",
                        options={"xatol": 1e-4, "fatol": 1e-7, "initial_simplex":
                                 np.array([[0, 0, 0], [0.05, 0, 0], [0, 0.05, 0], [0, 0, 0.005]])})
