@@ -123,7 +123,7 @@ def covered_from_front(X, faces, eps=1e-6):
     ends = np.cumsum(stop - start)
     cuts = np.searchsorted(ends, np.arange(PAIRS, ends[-1] + PAIRS, PAIRS), "right")
     for i, j in zip(np.r_[0, cuts[:-1]], cuts):
-        ids = np.arange(i, min(j, len(faces)))
+        ids = np.arange(i, j)
         n = stop[ids] - start[ids]
         pid = np.repeat(ids, n)
         cand = tri[np.repeat(start[ids], n) + group_offsets(n)]

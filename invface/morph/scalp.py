@@ -47,15 +47,15 @@ def scalp_offsets(Va, template, A, t):
     carried by the face similarity (A (3,3), t (3,)), along its normal (positive: outside),
     measured in the template's frame; NaN off the scalp (``scalp_zone``) and where the
     nearest template point is on its open edge rather than square below the vertex. Also the
-    template points (n,3) nearest each vertex."""
+    template points (n,3) nearest each vertex and whether they are on the scalp (n,) bool."""
     TV, TF = template.neutral, template.triangles
     q = np.linalg.solve(A, (np.asarray(Va, float) - t).T).T
     tri, w, d = closest_points(q, TV, TF)
     c = np.einsum("nk,nkj->nj", w, TV[TF[tri]])
     n = face_normals(TV, TF)[tri]
     s = np.einsum("ij,ij->i", q - c, n / np.linalg.norm(n, axis=1, keepdims=True))
-    usable = scalp_zone(c, template) & (np.abs(s) >= ALONG_NORMAL * d)
-    return np.where(usable, s, np.nan), c
+    zone = scalp_zone(c, template)
+    return np.where(zone & (np.abs(s) >= ALONG_NORMAL * d), s, np.nan), c, zone
 
 
 def scalp_zone(C, template):
@@ -104,9 +104,9 @@ def roughness(P, s, inner=0.01, outer=0.015, spacing=0.002):
 def hidden_scalp(Va, F, template, A, t):
     """Triangles (f,) bool of the aligned scan (Va (n,3), F (f,3)) over a hidden scalp, the
     regions they cover (list of names) and the largest offset (m) among them."""
-    s, C = scalp_offsets(Va, template, A, t)
+    s, C, zone = scalp_offsets(Va, template, A, t)
     measured = np.isfinite(s)
-    beyond = ~measured & scalp_zone(C, template)   # over the scalp, past the template's open edge
+    beyond = ~measured & zone                      # over the scalp, past the template's open edge
     s = np.nan_to_num(s)
     # seeds: more than SEED outside and rough like hair, or more than CROWN outside; in
     # connected patches of at least SEED_AREA (an ear's rim is not)

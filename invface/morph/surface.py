@@ -277,7 +277,8 @@ def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), sea
         say(f"{int((~ok).sum())} template vertices off the target: filled by a second Poisson solve")
         D, held = np.where(ok[:, None], Vs - Vt, 0.0), ok.copy()
         if carried is not None:
-            far = ~ok & (cKDTree(Vt[ok]).query(Vt)[0] > CARRY_BAND)
+            far = ~ok
+            far[far] = cKDTree(Vt[ok]).query(Vt[far])[0] > CARRY_BAND
             D[far], held[far] = carried[far] - Vt[far], True
             say(f"{int(far.sum())} of them follow the template carried by the face's similarity")
         fixed = np.flatnonzero(held)
