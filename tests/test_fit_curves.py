@@ -125,8 +125,11 @@ def test_face_mask_fills_the_detector_oval():
     holed = face_mask(pts, 80, 100)
     assert not holed[48, 50] and holed[40, 50] and face_mask(pts, 80, 100, holes=False)[48, 50]
     assert (mask & ~holed).sum() == pytest.approx(2 / 3 * 16 * 6, rel=0.35)    # the lens between them
-    c = curves_from_landmarks(np.arange(956, dtype=float).reshape(478, 2))
+    pts = np.arange(956, dtype=float).reshape(478, 2)
+    c = curves_from_landmarks(pts)
     assert set(c) == set(CURVE_INDICES) and {"nose_bridge", "nose_base", "jaw_line"} <= set(c)
+    # the nostril base's middle point lies halfway from landmark 2 (columella) to 164 (philtrum)
+    assert np.allclose(c["nose_base"][2], (pts[2] + pts[164]) / 2) and np.allclose(c["nose_base"][0], pts[240])
 
 
 def test_astronaut_photo_pose_and_light(small_expressive_model):

@@ -13,6 +13,11 @@ The detector's lip and eyelid contours map onto the model's curves of the same m
 (``PLATE_CURVES``); the actor's left eye is on the image's right in a frontal view. Its nose
 line (between the brows, 8, to the tip), nostril base (alar rim, subnasale, alar rim) and lower face oval (ear
 to ear under the chin) map onto the model's ``nose_bridge``, ``nose_base`` and ``jaw_line``.
+The nostril base is 240-97-S-326-460, S halfway from 2 to 164: the model's curve runs from
+the nostril's outer rim 4 mm above its subnasale, in straight lines through the nose, to the
+subnasale. On the five real photos and our own neutral plate its subnasale projected 0.32-0.64
+of the way from 2 (on the columella) to 164 (on the philtrum), and its ends lay 2-12 px inside
+98/327 (the alar base), beside 240/460; the old line 98-97-2-326-327 left 2.4-3.4 px per fit.
 Eyes and lips alone lie near one plane, so on a face of another identity the head's pitch
 absorbed the difference in proportions (astronaut photo: 0.58 rad with eyes and lips, 0.81
 with the nose added, -0.01 with the jaw line too; the photo is frontal). The jaw line is the
@@ -35,7 +40,7 @@ import numpy as np
 
 from ..errors import InvfaceError
 
-# MediaPipe canonical face-mesh indices, corner to corner
+# MediaPipe canonical face-mesh indices, corner to corner; (a, b, t) is the point a + t (b - a)
 CURVE_INDICES = {
     "lip_outer_upper": [61, 185, 40, 39, 37, 0, 267, 269, 270, 409, 291],
     "lip_outer_lower": [61, 146, 91, 181, 84, 17, 314, 405, 321, 375, 291],
@@ -46,7 +51,7 @@ CURVE_INDICES = {
     "eye_L_upper": [263, 466, 388, 387, 386, 385, 384, 398, 362],
     "eye_L_lower": [263, 249, 390, 373, 374, 380, 381, 382, 362],
     "nose_bridge": [8, 168, 6, 197, 195, 5, 4, 1],
-    "nose_base": [98, 97, 2, 326, 327],
+    "nose_base": [240, 97, (2, 164, 0.5), 326, 460],
     "jaw_line": [132, 58, 172, 136, 150, 149, 176, 148, 152, 377, 400, 378, 379, 365, 397, 288, 361],
 }
 # FaceLandmarksConnections.FACE_LANDMARKS_FACE_OVAL as a closed polygon, from the forehead
@@ -147,7 +152,12 @@ class LandmarkTracker:
 
 def curves_from_landmarks(points):
     """{curve name: (n, 2) px} from the detector's landmarks (478, 2)."""
-    return {k: points[v] for k, v in CURVE_INDICES.items()}
+    def at(k):
+        if isinstance(k, tuple):
+            a, b, t = k
+            return (1 - t) * points[a] + t * points[b]
+        return points[k]
+    return {name: np.array([at(k) for k in ids]) for name, ids in CURVE_INDICES.items()}
 
 
 def detect_curves(image_srgb, name="plate"):
