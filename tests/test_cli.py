@@ -66,7 +66,7 @@ def test_calibrate_auto_pose_finds_the_pose_from_curves(small_expressive_model, 
     """A plate of unknown pose: --auto-pose solves it from the curve file beside the plate
     (Eq. 15) before calibrating; --pose with it is refused."""
     from invface.fit.calibrate import Calibration
-    from invface.fit.curves import PLATE_CURVES, projection_jacobian, write_curves
+    from invface.fit.curves import PLATE_CURVES, curve_points, projection_jacobian, write_curves
     from invface.model.rig import euler_xyz
     from invface.render.camera import Camera
     from invface.render.plates import write_image
@@ -78,7 +78,7 @@ def test_calibrate_auto_pose_finds_the_pose_from_curves(small_expressive_model, 
     write_image(tmp_path / "p.png", image, bits=16)
     xr = m.neutral @ euler_xyz(rot).T + tr
     names = PLATE_CURVES + ("nose_bridge", "nose_base", "jaw_line")
-    write_curves(tmp_path / "p.curves.json", {n: projection_jacobian(cam, xr[m.curves[n]])[0] for n in names})
+    write_curves(tmp_path / "p.curves.json", {n: projection_jacobian(cam, curve_points(m, n, xr))[0] for n in names})
     out = tmp_path / "calib.npz"
     args = ("--resolution", str(SMALL_RESOLUTION), "--max-iter", "5", "-o", str(out))
     r = run("calibrate", str(tmp_path / "p.png"), "--auto-pose", *args)

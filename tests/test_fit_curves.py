@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from invface.errors import InvfaceError
-from invface.fit.curves import (PLATE_CURVES, closest_on_polyline, fit_curves, projection_jacobian,
+from invface.fit.curves import (PLATE_CURVES, closest_on_polyline, curve_points, fit_curves, projection_jacobian,
                                 read_curves, resample, write_curves)
 from invface.model.rig import euler_xyz
 from invface.render.camera import Camera
@@ -55,8 +55,21 @@ def test_curve_objective_jacobian_matches_finite_differences(small_expressive_mo
 def _plate_curves(model, cam, names, p, noise=0.3):
     x = model.surface_model("blendshape").surface(p) @ euler_xyz(ROT).T + TR
     rng = np.random.default_rng(0)
-    return {n: resample(projection_jacobian(cam, x[model.curves[n]])[0], 40) + rng.normal(0, noise, (40, 2))
+    return {n: resample(projection_jacobian(cam, curve_points(model, n, x))[0], 40) + rng.normal(0, noise, (40, 2))
             for n in names}
+
+
+def test_snapped_curves_are_smoothed_and_slit_curves_kept():
+    """A staircase (a curve snapped to grid vertices) is flattened with its ends held; the rows
+    are affine weights (they commute with the pose); slit curves keep their vertices."""
+    from invface.fit.curves import curve_weights
+    n = 21
+    stairs = np.c_[np.arange(n, dtype=float), 0.5 * (np.arange(n) % 2)]          # zig-zag of 0.5 px
+    W = curve_weights("lip_outer_upper", n)
+    assert np.allclose(W.sum(1), 1) and np.allclose(W[[0, -1]], np.eye(n)[[0, -1]])
+    smooth = W @ stairs
+    assert np.ptp(smooth[3:-3, 1]) < 0.02 and np.allclose(smooth[:, 0], stairs[:, 0])
+    assert np.array_equal(curve_weights("lip_inner_upper", n), np.eye(n))
 
 
 def test_curve_fit_matches_the_plate_curves(small_expressive_model):

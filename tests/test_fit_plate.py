@@ -6,7 +6,7 @@ import pytest
 
 from invface.errors import ImageError, InvfaceError
 from invface.fit.calibrate import Calibration
-from invface.fit.curves import PLATE_CURVES, projection_jacobian
+from invface.fit.curves import PLATE_CURVES, curve_points, projection_jacobian
 from invface.fit.plate import fit_plate, read_truth, vertex_errors, write_plate_fit
 from invface.fit.pose import posed_jacobian, posed_parts, posed_surface
 from invface.model import FitVector
@@ -234,7 +234,7 @@ def test_fit_plate_recovers_a_blendshape_plate(small_expressive_model, tmp_path,
     p, (x, xr) = _truth(m)
     g, a = studio_light(), skin_albedo(m)
     image, _ = render_plate(m, x, cam, g, a, ROT, TR, spp=32)
-    curves = {n: projection_jacobian(cam, xr[m.curves[n]])[0] for n in PLATE_CURVES}
+    curves = {n: projection_jacobian(cam, curve_points(m, n, xr))[0] for n in PLATE_CURVES}
     plate = Plate(image=image, camera=cam, path="synthetic")
     cal = Calibration(gamma=g, albedo=a)
     fit = fit_plate(m, plate, cal, curves, kind="blendshape", max_iter_shading=20, solver=solver)
@@ -263,7 +263,7 @@ def test_fit_plate_with_the_simulation_recovers_a_simulation_plate(small_express
     p, (x, xr) = _truth(m, "simulation")
     g, a = studio_light(), skin_albedo(m)
     image, _ = render_plate(m, x, cam, g, a, ROT, TR, spp=32)
-    curves = {n: projection_jacobian(cam, xr[m.curves[n]])[0] for n in PLATE_CURVES}
+    curves = {n: projection_jacobian(cam, curve_points(m, n, xr))[0] for n in PLATE_CURVES}
     plate = Plate(image=image, camera=cam, path="synthetic")
     fit = fit_plate(m, plate, Calibration(gamma=g, albedo=a), curves, kind="simulation", max_iter_shading=15)
     assert [s for s in dict.fromkeys(h["stage"] for h in fit.history)] == ["curves", "shading", "shading-simulation"]
@@ -283,7 +283,7 @@ def test_sample_plates_carry_their_truth(small_expressive_model, tmp_path):
     curves = read_curves(tmp_path / "smile_blendshape.curves.json", m, image_size=plate.camera.size)
     xr, truth = read_truth(tmp_path / "smile_blendshape.truth.json", m)
     assert truth["kind"] == "blendshape" and truth["weights"]["lipCornerPull_L"] == 0.7
-    uv = projection_jacobian(plate.camera, xr[m.curves["lip_outer_upper"]])[0]
+    uv = projection_jacobian(plate.camera, curve_points(m, "lip_outer_upper", xr))[0]
     assert np.abs(uv - curves["lip_outer_upper"]).max() < 2.0      # 0.3 px of drawing noise
     assert plate.image[60, 80].mean() > plate.image[2, 2].mean()    # the face is lit, the background grey
 

@@ -3,7 +3,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from invface.fit.curves import rms_px
+from invface.fit.curves import curve_points, rms_px
 from invface.fit.identity import fit_identity
 from invface.fit.pose import pose_points
 from invface.model.controls import FitVector
@@ -19,7 +19,7 @@ def _with_neutral(model, neutral):
 
 def _curves(model, cam, p):
     x = pose_points(model.surface_model("blendshape").surface(p), ROT, TR)
-    return {k: cam.project(x[v])[0] for k, v in model.curves.items()}
+    return {k: cam.project(curve_points(model, k, x))[0] for k in model.curves}
 
 
 def _gap(model, truth, cam, p):

@@ -93,14 +93,14 @@ def test_gradient_only_path_takes_one_adjoint_product(small_expressive_model):
     simulation's surface_vjp once per evaluation and never its Jacobian; the gradient is the
     dogleg path's J^T r of the same render (curves, prior and a sequence's temporal term
     included)."""
-    from invface.fit.curves import PLATE_CURVES, projection_jacobian
+    from invface.fit.curves import PLATE_CURVES, curve_points, projection_jacobian
     from invface.fit.pose import posed_surface
     from invface.fit.shading import ShadingObjective
     m = small_expressive_model
     cam, vec, z, g, a, plate = _sim_scene(m)
     sm = m.surface_model("simulation")
     xr = posed_surface(sm, z, vec)[1]
-    curves = {c: projection_jacobian(cam, xr[m.curves[c]])[0] + 0.7 for c in PLATE_CURVES}
+    curves = {c: projection_jacobian(cam, curve_points(m, c, xr))[0] + 0.7 for c in PLATE_CURVES}
     previous = z + 0.5 * vec.scales() * np.sin(np.arange(vec.size))
     obj = ShadingObjective(m, sm, cam, plate, g, a, vec.unpack(z)[0] * 0.9, curves, lam1=1e-3, spp=8,
                            previous=previous, temporal=0.02)

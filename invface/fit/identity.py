@@ -101,14 +101,14 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
     V = len(x)
 
     def data(d, *objs):
-        """Signed distances (n,) px, their gradient (V,3) of 1/2 |r|^2 and per curve (vertex ids,
-        d r / d d (n,3)) of the model displaced by d (V,3) m; objs: (CurveObjective, weight) pairs."""
+        """Signed distances (n,) px, their gradient (V,3) of 1/2 |r|^2 and per curve (vertex ids (m,),
+        d r / d d (n,m,3)) of the model displaced by d (V,3) m; objs: (CurveObjective, weight) pairs."""
         xr = pose_points(x + d, rotation, translation)
         rows, g, blocks = [np.zeros(0)], np.zeros((V, 3)), []
         for obj, w in objs:
             for vid, r, dr_dx in obj.signed(xr):
                 r, a = np.sqrt(w) * r, np.sqrt(w) * dr_dx @ R       # the correction is posed with the head
-                np.add.at(g, vid, r[:, None] * a)
+                np.add.at(g, vid, np.einsum("n,nmi->mi", r, a))
                 rows.append(r)
                 blocks.append((vid, a))
         return np.concatenate(rows), g, blocks
@@ -128,14 +128,16 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
         mu = (k * length) ** 2 * (length / spacing)
         reg = sp.kron(mu * K + mu / IDENTITY_ANCHOR ** 4 * M, sp.eye(3)).tocsr()
         _, g, blocks = data(D, *field_terms)
-        vid = np.concatenate([v for v, _ in blocks])                            # the same every step
-        rows = 3 * vid[:, None, None] + np.arange(3)[None, :, None]              # (n, 3, 1)
-        cols = 3 * vid[:, None, None] + np.arange(3)[None, None, :]              # (n, 1, 3)
-        rows, cols = (i.ravel() for i in np.broadcast_arrays(rows, cols))
+        # the data Jacobian's pattern (rows: residuals, columns: 3 vid + axis), the same every step
+        first = np.cumsum([0] + [len(a) for _, a in blocks])
+        rows = np.concatenate([np.broadcast_to((f + np.arange(len(a)))[:, None, None], a.shape).ravel()
+                               for f, (_, a) in zip(first, blocks)])
+        cols = np.concatenate([np.broadcast_to(3 * v[None, :, None] + np.arange(3), a.shape).ravel()
+                               for v, a in blocks])
         for _ in range(iterations):
-            a = np.concatenate([a for _, a in blocks])                          # (n, 3)
-            H = reg + sp.coo_matrix((np.einsum("ns,nt->nst", a, a).ravel(), (rows, cols)),
-                                    shape=(3 * V, 3 * V)).tocsr()
+            A = sp.csr_matrix((np.concatenate([a.ravel() for _, a in blocks]), (rows, cols)),
+                              shape=(first[-1], 3 * V))
+            H = reg + (A.T @ A).tocsr()
             step = spsolve(H.tocsc(), -(reg @ d.ravel() + g.ravel())).reshape(V, 3)
             d = d + step
             _, g, blocks = data(D + d, *field_terms)

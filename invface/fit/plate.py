@@ -29,7 +29,7 @@ import numpy as np
 
 from ..errors import ImageError, InvfaceError, SimulationError
 from ..model.controls import FitVector
-from .curves import CurveObjective, fit_curves, projection_jacobian, rms_px
+from .curves import CurveObjective, curve_points, fit_curves, projection_jacobian, rms_px
 from .lambdas import EQ15_LAMBDA_1, EQ16_TEMPORAL
 from .pose import posed_parts, posed_surface, unpose_points
 from .results import NamedControls, write_fit_files
@@ -180,7 +180,7 @@ def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=
         arrays["mask"] = np.asarray(plate.mask, bool)
     for i, n in enumerate(names):
         arrays[f"curve_{i}"] = np.asarray(curves[n], float)
-        arrays[f"model_curve_{i}"] = projection_jacobian(plate.camera, fit.surface[model.curves[n]])[0]
+        arrays[f"model_curve_{i}"] = projection_jacobian(plate.camera, curve_points(model, n, fit.surface))[0]
     return write_fit_files(folder, summary, arrays)
 
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..render.camera import Camera
 from ..render.synthetic import render_plate, skin_albedo, studio_light
-from .curves import PLATE_CURVES, projection_jacobian, write_curves
+from .curves import PLATE_CURVES, curve_points, projection_jacobian, write_curves
 
 # name -> (model kind that makes it, blendshape weights, jaw (6,), head rotation, translation)
 SAMPLES = {
@@ -67,7 +67,7 @@ def write_sample_plates(model, folder, names=None, size=(720, 540), noise=0.005,
         (folder / f"{name}.truth.json").write_text(json.dumps(truth, indent=1))
         xr = pose_points(x, rot, tr)
         rng = np.random.default_rng(100 + i)
-        curves = {c: projection_jacobian(cam, xr[model.curves[c]])[0] for c in PLATE_CURVES}
+        curves = {c: projection_jacobian(cam, curve_points(model, c, xr))[0] for c in PLATE_CURVES}
         curves = {c: v + rng.normal(0, curve_noise, v.shape) for c, v in curves.items()}
         write_curves(folder / f"{name}.curves.json", curves, image_size=cam.size)
         out.append(path)
@@ -128,7 +128,7 @@ def write_sample_clip(model, folder, n=24, kind="blendshape", size=(320, 240), f
         image, _ = render_plate(model, x, cam, gamma, albedo, rot, tr, noise=noise, seed=i,
                                 parts_x=model.parts_positions(p))
         xr = pose_points(x, rot, tr)
-        curves = {c: projection_jacobian(cam, xr[model.curves[c]])[0] for c in PLATE_CURVES}
+        curves = {c: projection_jacobian(cam, curve_points(model, c, xr))[0] for c in PLATE_CURVES}
         curves = {c: v + rng.normal(0, curve_noise, v.shape) for c, v in curves.items()}
         truth = {"kind": kind, "weights": weights, "jaw": p[vec.jaw].tolist(), "rotation": list(rot),
                  "translation": list(tr), "light": "studio_light()", "albedo": "skin_albedo(model, seed=0)",
