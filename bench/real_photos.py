@@ -1,0 +1,55 @@
+"""The real photos end to end (issue 26): one ``fit-plate`` command per photo, both model kinds.
+
+    python bench/real_photos.py OUT [--photos DIR] [--report-only]
+
+Runs ``invface fit-plate PHOTO --model-kind both -o OUT/<name>`` for every JPEG/PNG in DIR
+(default ``../shared/data/real/photos``), then prints per photo and kind: curve RMS (px), curves
+within 2 px, the fit's seconds, the lips' volume change and every curve over 2 px. With
+``--report-only`` it prints the table of an earlier run in OUT.
+"""
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+PHOTOS = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "photos"
+
+
+def table(out):
+    for d in sorted(p for p in out.iterdir() if p.is_dir()):
+        for kind in ("blendshape", "simulation"):
+            f = d / kind / "fit.json"
+            if not f.is_file():
+                print(f"{d.name:16s} {kind:10s} missing")
+                continue
+            s = json.loads(f.read_text())
+            by = s["curve_rms_px_by_curve"]
+            over = ", ".join(f"{n} {v:.1f}" for n, v in sorted(by.items()) if v > 2)
+            print(f"{d.name:16s} {kind:10s} {s['curve_rms_px']:.2f} px  {sum(v <= 2 for v in by.values())}/{len(by)}"
+                  f"  {s['seconds']['total']:5.1f} s  lips {100 * s['lip_volume_change']:+.1f} %  over 2 px: {over}")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--photos", type=Path, default=PHOTOS)
+    ap.add_argument("--report-only", action="store_true")
+    a = ap.parse_args()
+    if not a.report_only:
+        photos = sorted(p for p in a.photos.iterdir() if p.suffix.lower() in (".jpg", ".jpeg", ".png"))
+        if not photos:
+            sys.exit(f"{a.photos}: no photos")
+        a.out.mkdir(parents=True, exist_ok=True)
+        for p in photos:
+            t = time.perf_counter()
+            with open(a.out / f"{p.stem}.log", "w") as log:
+                rc = subprocess.call(["invface", "fit-plate", str(p), "--model-kind", "both", "-o", str(a.out / p.stem)],
+                                     stdout=log, stderr=subprocess.STDOUT)
+            print(f"{p.stem}: exit {rc}, {time.perf_counter() - t:.0f} s wall", flush=True)
+    table(a.out)
+
+
+if __name__ == "__main__":
+    main()
