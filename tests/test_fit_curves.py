@@ -109,6 +109,24 @@ def test_pose_from_curves_of_a_smile(small_expressive_model):
     assert {h["pass"] for h in fit.history} == {"pose", "controls"}
 
 
+def test_anchored_pose_pass_keeps_the_depth_of_the_calibration_pose(small_expressive_model):
+    """Eyes and lips only (the sample plates' curves) on an open mouth fix the head's depth
+    poorly: from a calibration pose at the plate's depth (rotation 0.02 rad off) the free pose
+    pass ends 1.8 mm deep; anchored to the calibration's translation, within 0.5 mm. The
+    anchor's rows act on the translation alone."""
+    from invface.fit.curves import pose_anchor
+    from invface.model.controls import FitVector
+    m = small_expressive_model
+    cam = Camera.front_view(720, 540)
+    curves = _plate_curves(m, cam, PLATE_CURVES, m.parameters({"lipsPart": 0.5, "lowerLipDepress": 0.4}))
+    err = {a: np.abs(fit_curves(m, cam, curves, rotation=ROT + 0.02, translation=TR, anchored=a).translation - TR).max()
+           for a in (False, True)}
+    assert err[True] < 0.5e-3 and err[True] < err[False] / 3, err
+    vec = FitVector.of(m)
+    c, w = pose_anchor(vec, np.zeros(vec.size), 3600.0)
+    assert np.all(w[vec.translation] == 1000.0) and not w[: vec.P + 3].any()
+
+
 def test_curve_file_errors(small_expressive_model, tmp_path):
     m = small_expressive_model
     write_curves(tmp_path / "ok.json", {"eye_L_upper": [[1, 2], [3, 4]]}, image_size=(720, 540))

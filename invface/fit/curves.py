@@ -29,7 +29,7 @@ from ..jsonfile import read_object
 from ..mesh.sections import resample_even as resample
 from ..model.controls import FitVector
 from .dogleg import dogleg
-from .lambdas import EQ15_LAMBDA_1, EQ15_TRACK_LAMBDA
+from .lambdas import EQ15_ANCHOR_LAMBDA, EQ15_LAMBDA_1, EQ15_TRACK_LAMBDA
 from .pose import pose_points, posed_jacobian, posed_surface, prior_rows, regulariser, temporal_prior
 
 PLATE_CURVES = ("lip_outer_upper", "lip_outer_lower", "lip_inner_upper", "lip_inner_lower",
@@ -283,8 +283,21 @@ def initial_pose(model, camera, curves, rotation=None, translation=None, samples
     return th, camera.R.T @ (tvec.ravel() - camera.t)
 
 
+def pose_anchor(vec, z, lam):
+    """The pose pass's anchor (ours): EQ15_ANCHOR_LAMBDA |(t - t_0) / 1 mm|^2, scaled with the face
+    as lam / EQ15_LAMBDA_1, on the head translation about z's: (centre z (size,), row weights
+    (size,)) for ``prior_rows``. Eyes and lips hardly fix the head's depth: with the tracking
+    pass's weak regulariser the expression made up for it, and on the open-mouth sample plate
+    the pose pass ended 7.6 mm deeper than the truth (12.1 mm from the given pose), outside what
+    the shading stage recovers (10.1 mm posed error after it)."""
+    w = np.zeros(vec.size)
+    w[vec.translation] = np.sqrt(EQ15_ANCHOR_LAMBDA * lam / EQ15_LAMBDA_1) / vec.scales()[vec.translation]
+    return np.asarray(z, float).copy(), w
+
+
 def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=None, rotation=None,
-               translation=None, solve_pose=True, max_iter=200, previous=None, temporal=0.0, progress=None):
+               translation=None, solve_pose=True, max_iter=200, previous=None, temporal=0.0, anchored=False,
+               progress=None):
     """Solve Eq. 15: controls from plate curves, and first the rigid pose. Returns a CurveFit.
 
     The paper's pose comes from tracked features; here, with ``solve_pose``, it comes from
@@ -297,7 +310,9 @@ def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=N
 
     In a sequence, ``previous`` (the previous frame's z) and ``temporal`` (px^2 per
     ``FitVector.scales()`` unit^2) add temporal |(z - previous) / scales|^2 to both passes:
-    weights, jaw and pose change between frames only as far as the curves ask."""
+    weights, jaw and pose change between frames only as far as the curves ask. Without a
+    previous frame, ``anchored`` holds the pose pass's head translation near the given one
+    (``pose_anchor``): for a given pose that means something, a calibration frame's."""
     if not curves:
         raise InvfaceError("no plate curves to fit")
     sm, vec = model.surface_model(kind), FitVector.of(model)
@@ -319,9 +334,13 @@ def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=N
     tracked = None
     if solve_pose:
         _, rot, tr = vec.unpack(z)
+        z0 = z
         z = vec.with_pose(z, *initial_pose(model, camera, curves, rot, tr))
+        if prior is None and anchored:
+            prior = pose_anchor(vec, z0, lam)
         z = solve(z, EQ15_TRACK_LAMBDA, True, "pose").x
         tracked = vec.unpack(z)[0]
+        prior = temporal_prior(vec, previous, temporal)
     res = solve(z, lam, False, "controls")
     obj = CurveObjective(model, sm, camera, curves, lam)
     _, xr = posed_surface(sm, res.x, vec)

@@ -23,6 +23,8 @@ EQ14_LAMBDA = 2500.0        # calibration: albedo smoothness
 EQ15_LAMBDA_1 = 3600.0      # curve fit: weight regulariser (px^2 per unit weight^2)
 EQ15_TRACK_LAMBDA = 1.0     # curve fit's pose pass (ours, not the paper's): a weak regulariser,
                             # so the pose does not explain the expression
+EQ15_ANCHOR_LAMBDA = 1.0    # curve fit's pose pass (ours): the head translation held near a calibration frame's,
+                            # px^2 per mm^2 (``fit.curves.pose_anchor``)
 EQ16_LAMBDA_1 = 1e-2        # shading: weight of the curve term E_1 (px^2); the paper's 1e-4 left it at about 1e-4
                             # of the image term in our units (linear light, whole pyramid): on a real clip the
                             # shading stage then moved the lips 1-3 px off the curves without lowering the image

@@ -96,7 +96,9 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     """Fit one plate. plate: ``render.plates.Plate`` (linear, undistorted; its mask, if any,
     restricts the shading term); calibration: ``fit.calibrate.Calibration`` (gamma, albedo);
     curves: {name: (n, 2) px} plate curves; kind: "blendshape" or "simulation"; start: the
-    previous frame's PlateFit (sequence mode: its controls and pose start this frame);
+    previous frame's PlateFit (sequence mode: its controls and pose start this frame; without
+    one the calibration's pose starts it, and the curve stage's pose pass holds the head's
+    translation near it: ``fit.curves.pose_anchor``);
     lam_curves: lambda_1 of Eq. 15 (px^2 per unit weight^2); solver: "dogleg" or "lbfgs" for
     the shading stages (``fit.shading.fit_shading``); temporal: with a ``start``, the weight of
     the temporal term of the curve stage (``fit_curves``); the shading stages take it times
@@ -116,7 +118,7 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     previous = None if start is None else FitVector.of(model).pack(start.p, start.rotation, start.translation)
     cf = fit_curves(model, cam, curves, kind="blendshape", lam=lam_curves, p0=p0, rotation=rot,
                     translation=tr, max_iter=max_iter_curves, previous=previous, temporal=temporal,
-                    progress=lambda h: say(dict(h, stage="curves")))
+                    anchored=start is None, progress=lambda h: say(dict(h, stage="curves")))
     history = [dict(h, stage="curves") for h in cf.history]
     seconds = {"curves": time.perf_counter() - t0}
     p, rot, tr, status = cf.p, cf.rotation, cf.translation, f"curves: {cf.status}"
