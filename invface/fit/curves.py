@@ -334,13 +334,13 @@ def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=N
     tracked = None
     if solve_pose:
         _, rot, tr = vec.unpack(z)
-        z0 = z
+        temporal_rows = prior
+        if anchored and prior is None:
+            prior = pose_anchor(vec, z, lam)
         z = vec.with_pose(z, *initial_pose(model, camera, curves, rot, tr))
-        if prior is None and anchored:
-            prior = pose_anchor(vec, z0, lam)
         z = solve(z, EQ15_TRACK_LAMBDA, True, "pose").x
         tracked = vec.unpack(z)[0]
-        prior = temporal_prior(vec, previous, temporal)
+        prior = temporal_rows
     res = solve(z, lam, False, "controls")
     obj = CurveObjective(model, sm, camera, curves, lam)
     _, xr = posed_surface(sm, res.x, vec)
