@@ -320,7 +320,7 @@ def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=N
     lo, hi = vec.bounds()
     history = []
 
-    def solve(z, lam, pose, name):
+    def solve(z, lam, pose, name, prior):
         lo_, hi_ = lo.copy(), hi.copy()
         if not pose:
             lo_[vec.pose], hi_[vec.pose] = z[vec.pose], z[vec.pose]
@@ -334,14 +334,11 @@ def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=N
     tracked = None
     if solve_pose:
         _, rot, tr = vec.unpack(z)
-        temporal_rows = prior
-        if anchored and prior is None:
-            prior = pose_anchor(vec, z, lam)
+        anchor = pose_anchor(vec, z, lam) if anchored and prior is None else prior
         z = vec.with_pose(z, *initial_pose(model, camera, curves, rot, tr))
-        z = solve(z, EQ15_TRACK_LAMBDA, True, "pose").x
+        z = solve(z, EQ15_TRACK_LAMBDA, True, "pose", anchor).x
         tracked = vec.unpack(z)[0]
-        prior = temporal_rows
-    res = solve(z, lam, False, "controls")
+    res = solve(z, lam, False, "controls", prior)
     obj = CurveObjective(model, sm, camera, curves, lam)
     _, xr = posed_surface(sm, res.x, vec)
     resid = {k: np.linalg.norm(v, axis=1) for k, v in obj.residuals(xr).items()}
