@@ -42,12 +42,17 @@ class DoglegResult:
 class NormalEquations:
     """0.5 |r|^2 and its Gauss-Newton pieces at one point: ``cost``, ``gradient`` g = J^T r
     (n,) and ``hessian`` H = J^T J (n, n). ``derivatives`` (a callable returning (g, H)) is
-    called on first use, so a rejected trial point costs only its residual. (Any object
-    with these three attributes will do.)"""
+    called on first use, so a rejected trial point costs only its residual. Or, split:
+    ``gradient_fn()`` -> g and ``hessian_fn(free)`` -> H, exact on the rows and columns of
+    the variables ``free`` (n,) bool and anything finite elsewhere: ``hessian_on(free)``,
+    which the dogleg asks for with the variables not held at a bound (their columns would
+    multiply zero steps), so a costly H is made only for the variables that can move.
+    (Any object with ``cost``, ``gradient`` and ``hessian`` will do.)"""
 
-    def __init__(self, cost, gradient=None, hessian=None, derivatives=None):
+    def __init__(self, cost, gradient=None, hessian=None, derivatives=None, gradient_fn=None, hessian_fn=None):
         self.cost = float(cost)
         self._g, self._H, self._derivatives = gradient, hessian, derivatives
+        self._gradient_fn, self._hessian_fn, self._free = gradient_fn, hessian_fn, None
 
     @classmethod
     def from_residuals(cls, r, J):
@@ -55,18 +60,30 @@ class NormalEquations:
         return cls(0.5 * float(r @ r), J.T @ r, J.T @ J)
 
     def _ensure(self):
-        if self._g is None:
+        if self._g is None and self._gradient_fn is not None:
+            self._g, self._gradient_fn = self._gradient_fn(), None
+        if self._g is None or (self._H is None and self._hessian_fn is None):
             self._g, self._H = self._derivatives()
             self._derivatives = None
 
     @property
     def gradient(self):
-        self._ensure()
+        if self._g is None:
+            self._ensure()
         return self._g
 
     @property
     def hessian(self):
-        self._ensure()
+        return self.hessian_on(None)
+
+    def hessian_on(self, free):
+        """H, exact at least on the rows and columns of ``free`` (n,) bool (None: all)."""
+        self.gradient
+        if self._hessian_fn is None:
+            return self._H
+        free = np.ones(len(self._g), bool) if free is None else np.asarray(free, bool)
+        if self._H is None or np.any(free & ~self._free):
+            self._H, self._free = self._hessian_fn(free), free.copy()
         return self._H
 
 
@@ -151,13 +168,15 @@ def dogleg(fun, x0, lower=None, upper=None, max_iter=50, radius=1.0, ftol=1e-10,
     history, status, t0 = [], "max_iter", time.perf_counter()
     it, mu = 0, 1.0
     for it in range(1, max_iter + 1):
-        g, H = ne.gradient, mu * ne.hessian
-        # variables held at a bound with the gradient pushing out of the box
+        g = ne.gradient
+        # variables held at a bound with the gradient pushing out of the box: they do not move,
+        # so their rows and columns of H are not needed
         held = ((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0))
         free = ~held
         if np.linalg.norm(g[free], np.inf) <= gtol:
             status = "gradient"
             break
+        H = mu * (ne.hessian_on(free) if hasattr(ne, "hessian_on") else ne.hessian)
         p = _box_dogleg_step(H, g, free, lo - x, hi - x, radius)
         predicted = -(g @ p + 0.5 * p @ H @ p)
         x_new = x + p

@@ -122,13 +122,19 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     history = [dict(h, stage="curves") for h in cf.history]
     seconds = {"curves": time.perf_counter() - t0}
     p, rot, tr, status = cf.p, cf.rotation, cf.translation, f"curves: {cf.status}"
-    # the blendshape stage only has to bring the simulation near: a looser stop there
-    stages = [("shading", "blendshape", 5e-3)] if kind == "blendshape" else \
-        [("shading", "blendshape", 2e-2), ("shading-simulation", "simulation", 1e-2)]
-    for stage, skind, ftol in stages if shading else []:
+    # coarse to fine: the blendshape model first fits the pyramid's lower levels (the render
+    # at half resolution, a quarter of the pixels to differentiate), then the kind fits the
+    # whole pyramid. For the simulation the blendshape steps only have to bring the head
+    # near: at most 6, as a blendshape optimum is a poor start for it (the same weights
+    # mean other shapes; from there the open-mouth plate's simulation stage stalled at once)
+    n = max_iter_shading
+    stages = [("shading-coarse", "blendshape", 2e-2, 1, n), ("shading", "blendshape", 5e-3, 0, n)] \
+        if kind == "blendshape" else \
+        [("shading-coarse", "blendshape", 2e-2, 1, min(6, n)), ("shading-simulation", "simulation", 1e-2, 0, n)]
+    for stage, skind, ftol, level, iters in stages if shading else []:
         t1 = time.perf_counter()
-        shade = dict(kind=skind, curves=curves, mask=plate.mask, max_iter=max_iter_shading, spp=spp,
-                     ftol=ftol, solver=solver, previous=previous, temporal=temporal_shading * temporal,
+        shade = dict(kind=skind, curves=curves, mask=plate.mask, max_iter=iters, spp=spp,
+                     ftol=ftol, solver=solver, previous=previous, temporal=temporal_shading * temporal, level=level,
                      progress=lambda h: say(dict(h, stage=stage)))
         try:
             sf = fit_shading(model, cam, plate.image, calibration.gamma, calibration.albedo, cf.p, rot, tr,

@@ -141,6 +141,16 @@ class Camera:
         return Camera(K=self.K.copy(), width=self.width, height=self.height,
                       dist=np.zeros(5), R=self.R.copy(), t=self.t.copy())
 
+    def pyramid_level(self, level):
+        """The undistorted camera of level ``level`` of the image's Gaussian pyramid (OpenCV's
+        ``pyrDown`` applied ``level`` times): pixel j of each level lies on pixel 2j of the one
+        above, so the focal length and principal point halve and the size is ceil(size / 2)."""
+        K, w, h = self.K.copy(), int(self.width), int(self.height)
+        for _ in range(int(level)):
+            K[:2] *= 0.5
+            w, h = (w + 1) // 2, (h + 1) // 2
+        return Camera(K=K, width=w, height=h, dist=np.zeros(5), R=self.R.copy(), t=self.t.copy())
+
     @property
     def center(self):
         """Camera centre in world coordinates (3,) m."""

@@ -101,6 +101,7 @@ class Sensitivity:
         dU = -self.res.sim.solver.solve(np.ascontiguousarray(R.T)).reshape(-1, self.P)
         dX = self.dXc.copy()
         dX[:, self.free] = dU.T.reshape(self.P, -1, 3)
+        self.ds.predictor = (self.res.p, self.res.X, dX)      # the next solves' first-order start
         return dX
 
     def gradient(self, gX):

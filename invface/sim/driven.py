@@ -59,6 +59,9 @@ class DrivenSimulation:
         self.n_blendshapes = K
         self.W = model.embedding_matrix()
         self.last = None
+        # (p (P,), X (N,3), dX/dp (P,N,3)) of the last tangent solve (sim.adjoint): a solve
+        # near it starts from the first-order prediction when that is lower in energy
+        self.predictor = None
         self.solved = set()        # parameter vectors (bytes) solved before: see result_at
         self.start = "last"        # where new solves start: see result_at
 
@@ -68,13 +71,19 @@ class DrivenSimulation:
 
     def solve(self, p, warm="last", **kw):
         """DrivenResult for parameters p. warm: 'last' (the previous solve), a DrivenResult or
-        None (cold, from the jaw-skinned rest state); other keywords go to Simulator.solve."""
+        None (cold, from the jaw-skinned rest state); a warm solve also tries the first-order
+        prediction from the last tangent solve (``predictor``), whichever start is lower in
+        energy. Other keywords go to Simulator.solve."""
         b, jaw = self.split(p)
         state = self.tracks.evaluate(b, self.model.jaw_matrix(jaw))
         if isinstance(warm, str):
             warm = self.last
+        guess = None
+        if warm is not None and self.predictor is not None:
+            p0, X0, dX = self.predictor
+            guess = X0 + np.tensordot(np.asarray(p, float) - p0, dX, axes=1)
         res = self.sim.solve(state.activations, jaw, tracks=self.tracks.springs(state),
-                             warm=warm.sim if warm is not None else None, **kw)
+                             warm=warm.sim if warm is not None else None, guess=guess, **kw)
         out = DrivenResult(np.asarray(p, float).copy(), state, res)
         self.last = out
         self.solved.add(out.p.tobytes())

@@ -224,9 +224,11 @@ class Simulator:
 
     # -- Newton -----------------------------------------------------------------------------
     def solve(self, activations=None, jaw=None, tracks=None, warm=None, rtol=1e-6,
-              max_iter=80, raise_on_failure=True, progress=None):
+              max_iter=80, raise_on_failure=True, progress=None, guess=None):
         """Steady state for muscle activations (dict or (M,)), jaw parameters (6,), optional
-        Tracks (Eq. 5), warm start from a previous SimResult. Returns a SimResult.
+        Tracks (Eq. 5), warm start from a previous SimResult, and a guess (N,3) m of the
+        state (its constrained vertices are placed exactly; Newton starts from it when it is
+        lower in energy than the warm start). Returns a SimResult.
 
         Converged when the free-DOF residual |f| <= rtol * force scale * sqrt(DOFs) (force
         scale: shear modulus x edge length^2 per DOF), wherever the solve started: measured
@@ -253,7 +255,13 @@ class Simulator:
             X0, a0, j0, T0 = self.model.rest_positions.astype(float), np.zeros_like(act), np.zeros(6), None
         if tracks is not None and T0 is None:
             T0 = X0[tracks.vertices]
-        out = self._newton(self._start(X0, j0, jaw), act, jaw, tracks, rtol, max_iter, progress, secs)
+        start = self._start(X0, j0, jaw)
+        if guess is not None:
+            fixed = self.dof_of_vertex < 0
+            guess = np.array(guess, float)
+            guess[fixed] = start[fixed]
+            start = self._better_start(start, guess, act, jaw, tracks)
+        out = self._newton(start, act, jaw, tracks, rtol, max_iter, progress, secs)
         steps, total = 0, out[2]
         if not out[1]:
 
