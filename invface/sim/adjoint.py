@@ -145,3 +145,17 @@ def cold_finite_differences(driven, p, gx, rtol=1e-10):
         else:
             fd[i] = (L(p + e) - L(p - e)) / (2 * h)
     return fd
+
+
+def activation_gradient(sim, result, gX):
+    """dLoss/da (M,) at a Simulator's equilibrium (jaw and tracks held) for dLoss/dX = gX
+    (N,3): one adjoint solve H mu = gX^U with the factorised Newton matrix at the solution,
+    then dLoss/da_m = -mu . dr/da_m, dr/da_m the active fibre forces of muscle m per unit
+    activation (Eq. 4). The muscle-level gradient of paper 000 Sec. 7, without the
+    blendshape-driven tracks (``Sensitivity`` has those); what the paper-scale bench times."""
+    gX = np.asarray(gX, float)
+    mu = np.zeros_like(gX)
+    mu[sim.free] = result.solver.solve(gX[sim.free].reshape(-1)).reshape(-1, 3)
+    fl, tets = sim.flesh, sim.elements.tets
+    per_entry = np.einsum("qni,qni->q", fl.active_forces(result.X), mu[tets[fl.ftets]])
+    return -np.bincount(fl.fmus, per_entry, minlength=len(sim.muscle_names))
