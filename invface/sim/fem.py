@@ -141,29 +141,55 @@ class Pattern:
     """
 
     def __init__(self, dof_of_vertex, tets, extra_pairs=None):
-        self.dof_of_vertex = np.asarray(dof_of_vertex, np.int64)
-        self.n = 3 * int(self.dof_of_vertex.max() + 1)
-        vd = self.dof_of_vertex[tets]                                     # (T,4)
-        edof = np.where(vd[:, :, None] >= 0, 3 * vd[:, :, None] + np.arange(3), -1).reshape(-1, 12)
-        self.elem_dofs = edof
-        r = np.repeat(edof, 12, axis=1).reshape(-1)
-        c = np.tile(edof, (1, 12)).reshape(-1)
-        keep = (r >= 0) & (c >= 0) & (r <= c)
-        self.elem_keep = np.flatnonzero(keep)
-        keys = r[keep] * self.n + c[keep]
-        extra = np.empty(0, np.int64)
+        dv = np.asarray(dof_of_vertex, np.int64)
+        self.dof_of_vertex = dv
+        nv = int(dv.max() + 1)
+        self.n = n = 3 * nv
+        vd = dv[np.asarray(tets, np.int64)]                               # (T,4)
+        self.elem_dofs = np.where(vd[:, :, None] >= 0, 3 * vd[:, :, None] + np.arange(3), -1).reshape(-1, 12)
+        # 3x3 blocks of free-vertex pairs (i <= j), sorted: the tets', the extra pairs', the diagonal
+        P, Q = vd[:, :, None], vd[:, None, :]
+        upper = (P >= 0) & (Q >= 0) & (P <= Q)                            # (T,4,4)
+        keys = [(P * nv + Q)[upper]]
         if extra_pairs is not None and len(extra_pairs):
-            er, ec = self._block_entries(np.asarray(extra_pairs, np.int64))
-            m = (er >= 0) & (ec >= 0)
-            er, ec = np.minimum(er[m], ec[m]), np.maximum(er[m], ec[m])
-            extra = er * self.n + ec
-        diag = np.arange(self.n) * (self.n + 1)
-        self.keys, inv = np.unique(np.concatenate([keys, extra, diag]), return_inverse=True)
-        self.elem_slot = inv[: len(keys)]
-        rows = self.keys // self.n
-        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=self.n))])
-        self.indices = (self.keys % self.n).astype(np.int64)
-        self.nnz = len(self.keys)
+            e = dv[np.asarray(extra_pairs, np.int64)]
+            e = e[(e >= 0).all(1)]
+            keys.append(e.min(1) * nv + e.max(1))
+        keys.append(np.arange(nv) * (nv + 1))
+        bkeys, binv = np.unique(np.concatenate(keys), return_inverse=True)
+        bi, bj = bkeys // nv, bkeys % nv
+        nb = np.bincount(bi, minlength=nv)                                # blocks per vertex row
+        rank = np.arange(len(bkeys)) - np.concatenate([[0], np.cumsum(nb)[:-1]])[bi]   # 0: diagonal
+        # DOF row 3i+a holds the diagonal block's columns 3i+a..3i+2, then 3 per block to its right
+        a3 = np.arange(3)
+        self.indptr = np.concatenate([[0], np.cumsum((3 - a3)[None, :] + 3 * (nb[:, None] - 1))])
+
+        def block_slots(k, a, b):
+            base = self.indptr[3 * bi[k] + a]
+            return np.where(rank[k] == 0, base + b - a, base + 3 - a + 3 * (rank[k] - 1) + b)
+
+        self.nnz = int(self.indptr[-1])
+        self.indices = np.empty(self.nnz, np.int64)
+        k = np.arange(len(bkeys))
+        for a in range(3):
+            for b in range(3):
+                m = (rank > 0) | (b >= a)
+                self.indices[block_slots(k[m], a, b)] = 3 * bj[m] + b
+        rows = np.repeat(np.arange(n), np.diff(self.indptr))
+        self.keys = rows * n + self.indices                               # sorted: CSR order
+        # each stored entry of each element matrix (T,12,12), flat, and its data slot
+        T = len(vd)
+        t, p, q = np.nonzero(upper)
+        kb = binv[: len(t)]
+        keep, slot = [], []
+        for a in range(3):
+            for b in range(3):
+                m = (p != q) | (b >= a)
+                keep.append(t[m] * 144 + (3 * p[m] + a) * 12 + 3 * q[m] + b)
+                slot.append(block_slots(kb[m], a, b))
+        self.elem_keep = np.concatenate(keep)
+        self.elem_slot = np.concatenate(slot)
+        assert T == 0 or self.elem_keep.max() < T * 144
         self.diag_slot = self.slots(np.arange(self.n), np.arange(self.n))
 
     def _block_entries(self, pairs):
