@@ -58,6 +58,35 @@ def test_forces_and_stiffness_match_finite_differences():
     assert np.linalg.norm(dg - K @ v) <= 1e-5 * np.linalg.norm(K @ v)
 
 
+def test_pattern_with_constrained_vertices_and_extra_pairs_matches_a_dense_assembly():
+    """fem.Pattern's slots (built from 3x3 vertex-pair blocks) against a dense assembly of the
+    same element matrices and coupling blocks, constrained vertices removed."""
+    X, tets, _, _ = flesh_block()
+    N, T = len(X), len(tets)
+    rng = np.random.default_rng(5)
+    free = rng.random(N) > 0.3
+    dof = np.full(N, -1)
+    dof[free] = np.arange(free.sum())
+    pairs = rng.integers(0, N, size=(40, 2))
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    Ke = rng.normal(size=(T, 12, 12))
+    Ke += Ke.transpose(0, 2, 1)
+    B = rng.normal(size=(len(pairs), 3, 3))
+    pat = Pattern(dof, tets, pairs)
+    both = np.concatenate([pairs, pairs[:, ::-1]])
+    got = pat.matrix(pat.assemble(Ke, [(both, np.concatenate([B, B.transpose(0, 2, 1)]))]), full=True).toarray()
+    A = np.zeros((3 * N, 3 * N))
+    for t in range(T):
+        d = (3 * tets[t][:, None] + np.arange(3)).reshape(-1)
+        A[np.ix_(d, d)] += Ke[t]
+    for (v, u), b in zip(pairs, B):
+        A[3 * v:3 * v + 3, 3 * u:3 * u + 3] += b
+        A[3 * u:3 * u + 3, 3 * v:3 * v + 3] += b.T
+    keep = (3 * np.flatnonzero(free)[:, None] + np.arange(3)).reshape(-1)
+    assert np.allclose(got, A[np.ix_(keep, keep)], atol=1e-12)
+    assert np.array_equal(pat.diag_slot, pat.slots(np.arange(pat.n), np.arange(pat.n)))
+
+
 def test_rest_state_has_zero_force_and_patch_test():
     X, tets, el, flesh = flesh_block()
     _, g0, _ = flesh.evaluate(X, [0.0], 1)

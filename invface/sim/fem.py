@@ -178,7 +178,6 @@ class Pattern:
         rows = np.repeat(np.arange(n), np.diff(self.indptr))
         self.keys = rows * n + self.indices                               # sorted: CSR order
         # each stored entry of each element matrix (T,12,12), flat, and its data slot
-        T = len(vd)
         t, p, q = np.nonzero(upper)
         kb = binv[: len(t)]
         keep, slot = [], []
@@ -189,7 +188,6 @@ class Pattern:
                 slot.append(block_slots(kb[m], a, b))
         self.elem_keep = np.concatenate(keep)
         self.elem_slot = np.concatenate(slot)
-        assert T == 0 or self.elem_keep.max() < T * 144
         self.diag_slot = self.slots(np.arange(self.n), np.arange(self.n))
 
     def _block_entries(self, pairs):
