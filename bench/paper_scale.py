@@ -8,7 +8,7 @@ side of the nose fail its quality bounds), so the bench refines it: ``--resoluti
 
 Stages, each printed with its seconds and the process's peak resident memory so far: the
 template build (anatomy only; cached like every template), its 1:8 refinement
-(``invface.model.refine``), the simulator's set-up (sparsity
+(``invface.morph.refine``), the simulator's set-up (sparsity
 pattern, contacts, symbolic analysis), a cold solve of a smile (zygomaticus major + levator
 anguli oris at 0.8) and of a jaw opening (0.2 rad), each with its Newton iterations and
 seconds per iteration by phase and, when it converged, the adjoint gradient of a loss on its
@@ -26,7 +26,7 @@ import numpy as np
 
 import invface
 from invface.mesh.tets import quality_summary
-from invface.model.refine import refine
+from invface.morph.refine import refine
 from invface.sim.adjoint import activation_gradient
 from invface.sim.quasistatic import Simulator
 

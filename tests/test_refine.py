@@ -1,9 +1,9 @@
-"""Red refinement of the flesh mesh (mesh.refine, model.refine)."""
+"""Red refinement of the flesh mesh (mesh.refine, morph.refine)."""
 import numpy as np
 
 from invface.mesh.refine import subdivide
 from invface.mesh.tets import boundary_faces, face_use, quality_summary, signed_volumes
-from invface.model.refine import refine
+from invface.morph.refine import refine
 from invface.sim.quasistatic import Simulator
 
 

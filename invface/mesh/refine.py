@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .tets import signed_volumes
+from .tets import orient
 
 # the six edges of a tet, in the order of the midpoint columns m01 m02 m03 m12 m13 m23
 _EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
@@ -41,6 +41,4 @@ def subdivide(X, tets):
     choice = np.argmin(diag, axis=1)
     local = np.concatenate([np.broadcast_to(_CORNERS, (T, 4, 4)), _OCTA[choice]], axis=1)   # (T,8,4)
     out = np.take_along_axis(cols[:, None, :], local.reshape(T, 1, 32), axis=2).reshape(T * 8, 4)
-    neg = signed_volumes(X2, out) < 0
-    out[neg, 2], out[neg, 3] = out[neg, 3].copy(), out[neg, 2].copy()
-    return X2, out, edges
+    return X2, orient(X2, out), edges

@@ -19,6 +19,14 @@ def signed_volumes(X, tets):
     return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
 
 
+def orient(X, tets):
+    """Swap two vertices of every negatively oriented tet so all volumes are positive."""
+    tets = tets.copy()
+    neg = signed_volumes(X, tets) < 0
+    tets[neg, 2], tets[neg, 3] = tets[neg, 3].copy(), tets[neg, 2].copy()
+    return tets
+
+
 def dihedral_angles(X, tets):
     """The six interior dihedral angles (T,6) in radians of each tet."""
     p = X[tets]

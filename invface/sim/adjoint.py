@@ -83,10 +83,7 @@ class Sensitivity:
 
     def _rhs_transpose(self, mu):
         """mu . dr/dp (P,) for mu (N,3) zero on constrained vertices, without forming dr/dp."""
-        fl, tets = self.sim.flesh, self.sim.elements.tets
-        per_muscle = np.bincount(fl.fmus, np.einsum("qni,qni->q", self.active, mu[tets[fl.ftets]]),
-                                 minlength=len(self.da))
-        g = per_muscle @ self.da
+        g = _active_work(self.sim, self.active, mu) @ self.da
         tr = self.ds.tracks
         g -= np.einsum("pvi,vi->p", self.dt, tr.stiffness[:, None] * mu[tr.vertices])
         Hmu = self._stiffness_times(mu)
@@ -107,9 +104,7 @@ class Sensitivity:
     def gradient(self, gX):
         """dLoss/dp (P,) for dLoss/dX = gX (N,3): one adjoint solve."""
         gX = np.asarray(gX, float)
-        mu = np.zeros((self.N, 3))
-        mu[self.free] = self.res.sim.solver.solve(gX[self.free].reshape(-1)).reshape(-1, 3)
-        return -self._rhs_transpose(mu) + np.einsum("pni,ni->p", self.dXc, gX)
+        return -self._rhs_transpose(_adjoint_state(self.sim, self.res.sim, gX)) + np.einsum("pni,ni->p", self.dXc, gX)
 
     def surface_jacobian(self):
         """dx/dp (P, V, 3) of the render surface."""
@@ -153,9 +148,21 @@ def activation_gradient(sim, result, gX):
     then dLoss/da_m = -mu . dr/da_m, dr/da_m the active fibre forces of muscle m per unit
     activation (Eq. 4). The muscle-level gradient of paper 000 Sec. 7, without the
     blendshape-driven tracks (``Sensitivity`` has those); what the paper-scale bench times."""
-    gX = np.asarray(gX, float)
+    mu = _adjoint_state(sim, result, np.asarray(gX, float))
+    return -_active_work(sim, sim.flesh.active_forces(result.X), mu)
+
+
+def _adjoint_state(sim, result, gX):
+    """mu (N,3): H mu = gX^U on the free DOFs (H the factorised Newton matrix of the SimResult
+    ``result``), zero on the constrained vertices."""
     mu = np.zeros_like(gX)
     mu[sim.free] = result.solver.solve(gX[sim.free].reshape(-1)).reshape(-1, 3)
+    return mu
+
+
+def _active_work(sim, active, mu):
+    """mu . dr/da_m per muscle (M,): the active forces per unit activation (Q,4,3)
+    (``FleshModel.active_forces``) against mu (N,3)."""
     fl, tets = sim.flesh, sim.elements.tets
-    per_entry = np.einsum("qni,qni->q", fl.active_forces(result.X), mu[tets[fl.ftets]])
-    return -np.bincount(fl.fmus, per_entry, minlength=len(sim.muscle_names))
+    return np.bincount(fl.fmus, np.einsum("qni,qni->q", active, mu[tets[fl.ftets]]),
+                       minlength=len(sim.muscle_names))

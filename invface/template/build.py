@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, MeshError
-from ..mesh.tets import harmonic, laplacian, quality_summary
+from ..mesh.tets import harmonic, laplacian, orient, quality_summary
 from ..model.facemodel import FaceModel
 from . import grid
 from .features import find_features
@@ -17,7 +17,7 @@ from .muscles import build_muscles
 from .parts import template_parts
 from .shape import JAW_PIVOT, MOUTH_Y, tissue_depth
 from .skull import skull_meshes
-from .shell import embed_fine, layer_radii, orient, prism_tets
+from .shell import embed_fine, layer_radii, prism_tets
 from .surfaces import build_grids
 
 GENERATOR_VERSION = "3"     # 2: the inner parts (eyes, teeth, tongue, mouth lining); 3: the skull

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh.tets import barycentric, signed_volumes
+from ..mesh.tets import barycentric
 
 
 def layer_radii(r_skin, r_inner, n_layers):
@@ -30,14 +30,6 @@ def prism_tets(triangles, n_skin, n_layers):
                 np.stack([a + o, b + o, b + o2, c + o2], 1),
                 np.stack([a + o, a + o2, b + o2, c + o2], 1)]
     return np.concatenate(out)
-
-
-def orient(X, tets):
-    """Swap two vertices of every negatively oriented tet so all volumes are positive."""
-    tets = tets.copy()
-    neg = signed_volumes(X, tets) < 0
-    tets[neg, 2], tets[neg, 3] = tets[neg, 3].copy(), tets[neg, 2].copy()
-    return tets
 
 
 def embed_fine(coarse, fine, factor, X, tets, n_layers):

@@ -3,11 +3,14 @@ anatomy simulated on eight times the tets (issue 30's paper-scale bench: the res
 template's 142k tets become 1.14M, near the paper's 1.47M)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..mesh.refine import subdivide
 from ..mesh.tets import barycentric
-from .facemodel import FaceModel, Muscle
+from ..model.facemodel import FaceModel, Muscle
+from ..sim.poisson import track_displacements
 
 
 def refine(model: FaceModel, levels=1, progress=None) -> FaceModel:
@@ -41,19 +44,14 @@ def refine(model: FaceModel, levels=1, progress=None) -> FaceModel:
         cand = children(m.embed_tets).reshape(-1, 8)
         w = np.stack([barycentric(X, tets, cand[:, c], P) for c in range(8)], axis=1)   # (V,8,4)
         best = np.argmax(w.min(axis=2), axis=1)
-        m = FaceModel(**{**{f: getattr(m, f) for f in _FIELDS},
-                         "rest_positions": X, "tets": tets, "fixed_cranium": fixed(m.fixed_cranium),
-                         "fixed_jaw": fixed(m.fixed_jaw), "volume_jaw_weights": vw, "muscles": muscles,
-                         "embed_tets": cand[np.arange(len(cand)), best],
-                         "embed_weights": w[np.arange(len(cand)), best], "track_displacements": None,
-                         "meta": {**m.meta, "refined": int(m.meta.get("refined", 0)) + 1}})
+        # the rest carried over as it is (a new model: no surface models or embedding cached)
+        m = replace(m, rest_positions=X, tets=tets, fixed_cranium=fixed(m.fixed_cranium),
+                    fixed_jaw=fixed(m.fixed_jaw), volume_jaw_weights=vw, muscles=muscles,
+                    embed_tets=cand[np.arange(len(cand)), best], embed_weights=w[np.arange(len(cand)), best],
+                    track_displacements=None, meta={**m.meta, "refined": int(m.meta.get("refined", 0)) + 1},
+                    _surface_models={}, _embedding=None)
     if model.track_displacements is not None:
-        from ..sim.poisson import track_displacements
         say("muscle-track precompute on the refined mesh (Poisson solves, Eq. 10-11)")
         m.track_displacements = track_displacements(m)
     return m
 
-
-_FIELDS = ("neutral", "triangles", "blendshape_names", "blendshapes", "jaw_pivot", "jaw_frame",
-           "jaw_weights", "landmarks", "curves", "cranium_mesh", "jaw_mesh", "blendshape_activations",
-           "track_displacements", "scan_transform", "parts")
