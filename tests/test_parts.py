@@ -14,7 +14,7 @@ OPEN = {"jaw": [0.25, 0, 0, 0, 0, 0]}
 
 def test_the_template_has_eyes_teeth_tongue_and_lining_inside_its_skin(small_model):
     parts = small_model.parts
-    assert parts.names == ["eye_L", "eye_R", "upper_teeth", "lower_teeth", "tongue", "mouth_lining"]
+    assert parts.names == ["eye_L", "conjunctiva_L", "eye_R", "conjunctiva_R", "upper_teeth", "lower_teeth", "tongue", "mouth_lining"]
     parts.validate()
     # nothing pokes through the skin at rest
     assert skin_field(parts.vertices.copy()).max() < 0

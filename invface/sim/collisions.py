@@ -192,6 +192,73 @@ def _bone_meshes(model):
     return out
 
 
+def fit_sphere(P):
+    """Least-squares sphere (centre (3,), radius) through points P (n,3):
+    |p|^2 = 2 c.p + (r^2 - |c|^2) solved for c and r."""
+    P = np.asarray(P, float)
+    A = np.concatenate([2 * P, np.ones((len(P), 1))], 1)
+    sol = np.linalg.lstsq(A, np.einsum("ni,ni->n", P, P), rcond=None)[0]
+    c = sol[:3]
+    return c, float(np.sqrt(sol[3] + c @ c))
+
+
+def _eyeballs(model):
+    """[(centre (3,), radius)] of the model's eyeballs (inner parts named eye_*), which ride
+    the cranium: fixed in the simulation's frame."""
+    if model.parts is None:
+        return []
+    return [fit_sphere(model.parts.mesh(n)[0]) for n in model.parts.names if str(n).startswith("eye_")]
+
+
+class EyeballContacts:
+    """The lids sliding on the eyeballs: each free boundary vertex within ``radius`` of an
+    eyeball's surface at rest is kept outside that sphere (centre c, radius R) by the penalty
+    of its gap
+
+        gap = |x - c| - R - gap_rest,   E = e(gap)    (e: ``penalty``, gap_rest = min(rest gap, 0))
+
+    a C2 function of x alone (the sphere is rigid on the cranium), exact for any slide: unlike
+    the triangle contacts, a lid that travels over the whole eyeball never leaves it.
+    Gradient e' n, Hessian e'' n n^T + e'/|x - c| (I - n n^T), n = (x - c)/|x - c|."""
+
+    def __init__(self, X0, cand, spheres, stiffness, radius):
+        vs, cs, rs = [], [], []
+        for c, R in spheres:
+            d = np.linalg.norm(X0[cand] - c, axis=1) - R
+            near = cand[d < radius]
+            vs.append(near)
+            cs.append(np.tile(c, (len(near), 1)))
+            rs.append(np.full(len(near), R))
+        self.v = np.concatenate(vs) if vs else np.zeros(0, np.int64)
+        self.c = np.concatenate(cs) if cs else np.zeros((0, 3))
+        self.R = np.concatenate(rs) if rs else np.zeros(0)
+        self.stiffness = float(stiffness)
+        self.rest_gap = np.zeros(len(self.v))
+        self.rest_gap = np.minimum(self._gap(X0)[0], 0.0)
+
+    def __len__(self):
+        return len(self.v)
+
+    def _gap(self, X):
+        d = np.asarray(X, float)[self.v] - self.c
+        rho = np.linalg.norm(d, axis=1)
+        return rho - self.R - self.rest_gap, d / rho[:, None], rho
+
+    def terms(self, X, order):
+        """(vertex ids (e,), energy (e,), gradient (e,3) if order >= 1, Hessian (e,3,3) if 2)
+        of the acting contacts at positions X (N,3)."""
+        gap, n, rho = self._gap(X)
+        m = gap < 0
+        e, de, dde = penalty(gap[m], self.stiffness)
+        out = [self.v[m], e]
+        if order >= 1:
+            out.append(de[:, None] * n[m])
+        if order >= 2:
+            nn = np.einsum("ci,cj->cij", n[m], n[m])
+            out.append(dde[:, None, None] * nn + (de / rho[m])[:, None, None] * (np.eye(3) - nn))
+        return out
+
+
 class Collisions:
     """Contact model of a FaceModel's flesh: lips/lids self-contact and flesh against bone.
 
@@ -244,6 +311,7 @@ class Collisions:
         q0 = self._q(Q0)
         self.rest_gap = np.minimum(plane_gap(*(q0[:, 3 * i:3 * i + 3] for i in range(4)), order=0), 0.0)
         self.reach = np.tile([0.0, radius], (len(self.v), 1))
+        self.eyes = EyeballContacts(X0, cand, _eyeballs(model), stiffness, radius)
 
     def __len__(self):
         return len(self.v)
@@ -297,7 +365,7 @@ class Collisions:
 
     def energy(self, X, M):
         """Collision energy (J) at positions X (N,3), jaw transform M (4,4)."""
-        return float(self._active(X, M, 0)[1].sum())
+        return float(self._active(X, M, 0)[1].sum() + self.eyes.terms(X, 0)[1].sum())
 
     def gradient(self, X, M):
         """Energy gradient (N,3) (= minus the collision forces)."""
@@ -307,6 +375,8 @@ class Collisions:
         flesh = ids < self.n_vertices
         out = np.zeros((self.n_vertices, 3))
         np.add.at(out, ids[flesh], grad[flesh])
+        v, _, g = self.eyes.terms(X, 1)
+        np.add.at(out, v, g)
         return out
 
     def blocks(self, X, M, project=False):
@@ -320,7 +390,10 @@ class Collisions:
         pairs = np.stack([ids[:, a.ravel()], ids[:, b.ravel()]], 2).reshape(-1, 2)
         B = H.reshape(-1, 4, 3, 4, 3).transpose(0, 1, 3, 2, 4).reshape(-1, 3, 3)
         keep = (pairs < self.n_vertices).all(1)
-        return [(pairs[keep], B[keep])]
+        v, _, _, He = self.eyes.terms(X, 2)
+        if project and len(He):
+            He = project_psd(He)
+        return [(pairs[keep], B[keep]), (np.stack([v, v], 1), He)]
 
     def jaw_derivative(self, X, M, dM):
         """d(energy gradient)/d(jaw parameter) (P,N,3) for jaw-transform derivatives dM (P,4,4):

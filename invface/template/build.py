@@ -12,6 +12,7 @@ from ..errors import ConfigError, MeshError
 from ..mesh.tets import harmonic, laplacian, orient, quality_summary
 from ..model.facemodel import FaceModel
 from . import grid
+from .eyelids import lid_inner_radii, on_eyeball, open_lids
 from .features import find_features
 from .muscles import build_muscles
 from .parts import template_parts
@@ -45,15 +46,25 @@ def sizes(resolution):
 
 
 def _regions(P):
-    """Classify inner-surface points P (n,3): 0 cranium, 1 jaw, 2 free (lip and cheek mucosa
-    and the band along the occlusal line where the mouth opens)."""
+    """Classify inner-surface points P (n,3): 0 cranium, 1 jaw, 2 free (lip and cheek mucosa,
+    the band along the occlusal line where the mouth opens, and the lids' inner surface on the
+    eyeballs, which slides on them)."""
     x, y, z = P[:, 0], P[:, 1], P[:, 2]
     # below the occlusal plane (mouth line tilted up towards the condyles) moves with the jaw
     occl = MOUTH_Y + (0.113 - z) * (JAW_PIVOT[1] - MOUTH_Y) / (0.113 - JAW_PIVOT[2])
     jaw = (y < occl) & (y > -0.105) & (z > -0.005)
     lips = ((x / 0.056) ** 2 + ((y - MOUTH_Y) / 0.017) ** 2 < 1) & (z > 0.02)
     band = (np.abs(y - occl) < 0.007) & (z > 0.0)
-    return np.where(lips | band, 2, np.where(jaw, 1, 0))
+    return np.where(lips | band | on_eyeball(P), 2, np.where(jaw, 1, 0))
+
+
+def _lid_sides(skin):
+    """The left eye's slit points (s,3) and the ids of the upper and lower lids' slit
+    vertices of both eyes on a SkinGrid (the arguments of ``eyelids.open_lids``)."""
+    P = skin.positions()
+    upper = [skin.slit_vertices(e, "upper")[1:-1] for e in ("eye_L", "eye_R")]
+    lower = [skin.slit_vertices(e, "lower")[1:-1] for e in ("eye_L", "eye_R")]
+    return P[skin.slit_vertices("eye_L", "upper")], np.concatenate(upper), np.concatenate(lower)
 
 
 def generate(resolution=1.0, progress=None, expressions=True):
@@ -70,10 +81,11 @@ def generate(resolution=1.0, progress=None, expressions=True):
     say(f"flesh: {n_layers} layers of prisms")
     ni, nj = coarse.shape
     skin_grid_pts = coarse.positions()[: ni * nj].reshape(ni, nj, 3)
-    r_inner = coarse.r - depth_of(skin_grid_pts)
+    r_inner = lid_inner_radii(coarse.alpha, coarse.beta, coarse.r, coarse.r - depth_of(skin_grid_pts))
     R = layer_radii(coarse.r, r_inner, n_layers)
     X = np.concatenate([coarse.positions(R[k]) for k in range(n_layers + 1)])
     Ns = len(coarse.positions())
+    X = open_lids(X, *_lid_sides(coarse), column=np.arange(len(X)) % Ns)
     tets = orient(X, prism_tets(coarse.triangles, Ns, n_layers))
     q = quality_summary(X, tets)
     if q["inverted"] or q["min_dihedral_deg"] < MIN_DIHEDRAL_DEG or q["min_radius_ratio"] < MIN_RADIUS_RATIO:
@@ -91,8 +103,9 @@ def generate(resolution=1.0, progress=None, expressions=True):
     vw = np.clip(vw, 0.0, 1.0)
 
     say("embedding the render skin")
-    Vf = fine.positions()
-    etet, ew = embed_fine(coarse, fine, factor, X, tets, n_layers)
+    Vf_closed = fine.positions()
+    Vf = open_lids(Vf_closed, *_lid_sides(fine))
+    etet, ew = embed_fine(coarse, fine, factor, X, tets, n_layers, Vf)
     jaw_w = np.clip(np.einsum("vk,vk->v", ew, vw[tets[etet]]), 0.0, 1.0)
 
     say("muscles")
@@ -123,8 +136,9 @@ def generate(resolution=1.0, progress=None, expressions=True):
     )
     if expressions:
         from ..sim.poisson import track_displacements
-        from .expressions import calibrate_activation_curves, simulate_blendshapes
+        from .expressions import add_blinks, calibrate_activation_curves, simulate_blendshapes
         simulate_blendshapes(model, progress=say)
+        add_blinks(model, Vf_closed)
         say("muscle-track precompute (Poisson solves, Eq. 10-11)")
         model.track_displacements = track_displacements(model)
         calibrate_activation_curves(model)

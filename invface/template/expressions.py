@@ -40,6 +40,37 @@ ACTION_UNITS = {
 }
 
 
+# The lids' closing (AU45) is not simulated: the open lids are the flesh's stress-free rest
+# state, and closing them stretches the upper lid over 10 mm of eyeball, which the lids'
+# muscle ring does not do against the elastic flesh (it narrowed the fissure from 9.9 to
+# 7.3 mm at full activation, and a ring's inward pull vanishes as its arcs straighten).
+# Each blink is the lids rotated back over the eyeball onto the closed slit they were opened
+# from (eyelids.open_lids), with the palpebral ring's activation recorded for Eq. 9's curve;
+# the simulation follows it through the palpebral tracks (Eq. 5).
+BLINKS = {"eyeBlink_L": ({"orbicularis_oculi_palpebralis": 0.8}, "L", None),
+          "eyeBlink_R": ({"orbicularis_oculi_palpebralis": 0.8}, "R", None)}
+
+
+def add_blinks(model, closed):
+    """Append the BLINKS shapes to a model's blendshapes (in place): closed (V,3) m is the
+    render skin with the lids closed (before ``eyelids.open_lids``); eyeBlink_L moves the
+    vertices with x > 0 onto it, eyeBlink_R those with x < 0."""
+    x = model.neutral
+    delta = np.asarray(closed, float) - x
+    names, deltas, acts = [], [], []
+    for name, unit in BLINKS.items():
+        side = x[:, 0] > 0 if unit[1] == "L" else x[:, 0] < 0
+        names.append(name)
+        deltas.append(np.where(side[:, None], delta, 0.0))
+        acts.append(activations_for(unit, model.muscles))
+    model.blendshape_names = list(model.blendshape_names) + names
+    model.blendshapes = np.concatenate([model.blendshapes, np.array(deltas)])
+    model.blendshape_activations = np.concatenate([model.blendshape_activations, np.array(acts)])
+    model.meta = {**model.meta, "blendshape_jaw": {**model.meta.get("blendshape_jaw", {}),
+                                                   **{n: [0.0] * 6 for n in names}}}
+    return model
+
+
 def activations_for(unit, muscles):
     """Activation vector (M,) for action-unit spec (acts, sides, jaw) over ``muscles``."""
     acts, sides, _ = unit

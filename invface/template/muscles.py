@@ -21,6 +21,8 @@ MUSCLES = {
     "corrugator_supercilii": ("pair", [(0.008, 0.050, 0.9), (0.018, 0.056, 0.5), (0.030, 0.059, 0.2)], 0.0055, False),
     "procerus": ("M", [(0.0, 0.028, 0.9), (0.0, 0.042, 0.5), (0.0, 0.056, 0.2)], 0.0065, False),
     "orbicularis_oculi": ("pair", "ring:0.031,0.034,0.025,0.020,0.35", 0.0075, True),
+    # the palpebral part (pretarsal and preseptal), in the lids, which slide on the eyeball
+    "orbicularis_oculi_palpebralis": ("pair", "ring:0.031,0.0335,0.016,0.011,0.35", 0.005, True),
     "levator_labii_superioris_alaeque_nasi": ("pair", [(0.012, 0.036, 0.9), (0.014, 0.008, 0.5), (0.015, -0.019, 0.2)], 0.0045, False),
     "levator_labii_superioris": ("pair", [(0.025, 0.018, 0.9), (0.019, -0.004, 0.5), (0.012, -0.024, 0.2)], 0.0055, False),
     "zygomaticus_minor": ("pair", [(0.042, 0.012, 0.9), (0.030, -0.008, 0.5), (0.018, -0.026, 0.2)], 0.0045, False),

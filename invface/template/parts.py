@@ -4,7 +4,8 @@ Built procedurally from the head's anatomical positions (``shape``) and its bone
 millimetre-scale adult proportions:
 
 - eyeballs: spheres of radius ``EYE_RADIUS`` (12.2 mm; adult axial length ~24 mm) at the
-  orbit centres, looking along +Z; iris radius 6 mm, pupil 2 mm;
+  orbit centres, looking along +Z; iris radius 6 mm, pupil 2 mm; behind each the
+  conjunctiva that the open fissure shows at its corners;
 - teeth: an upper and a lower dental arch (half-ellipse 27 mm half-width at the second
   molars, 45 mm deep), crowns 10 -> 7 mm tall and 7 -> 10 mm thick from incisors to molars,
   with gums, the occlusal plane 1 mm under the stomion at the incisors and rising 10 degrees
@@ -28,6 +29,7 @@ MM = 1e-3
 SCLERA = (0.68, 0.64, 0.60)
 IRIS = (0.20, 0.11, 0.06)
 PUPIL = (0.015, 0.015, 0.015)
+CONJUNCTIVA = (0.42, 0.18, 0.16)
 TOOTH = (0.72, 0.68, 0.58)
 GUM = (0.55, 0.24, 0.24)
 TONGUE = (0.45, 0.17, 0.16)
@@ -90,6 +92,17 @@ def eyeball(centre, radius=EYE_RADIUS, iris=6.0 * MM, pupil=2.0 * MM):
     alb[th <= t_iris + 1e-9] = np.array(IRIS) * (1 - 0.5 * ring[th <= t_iris + 1e-9, None])
     alb[th <= t_pupil + 1e-9] = PUPIL
     return V, F, alb
+
+
+def conjunctiva(centre):
+    """The conjunctival sac behind an open eye's corners (V, F, albedo): an ellipsoidal cap
+    4 mm behind the eyeball's centre, 15.5 mm to either side and 12 mm up, down and forwards,
+    so it stays behind the eyeball (its front is 4 mm behind the cornea's base) and fills
+    what the fissure shows beyond the eyeball's outline at the canthi (the fissure is 26 mm
+    wide, the eyeball 24.4 mm); it lies 2.7 mm or more inside the skin."""
+    V, F, _ = _sphere(np.asarray(centre) - (0, 0, 4 * MM), (15.5 * MM, 12 * MM, 12 * MM),
+                      np.linspace(0, np.radians(110), 12), 36)
+    return V, F, np.tile(CONJUNCTIVA, (len(V), 1))
 
 
 def _arch(z_front, half_width, depth, step=0.7 * MM, widths=UPPER_WIDTHS):
@@ -193,6 +206,7 @@ def template_parts(inner_vertices):
     for side, sx in (("L", 1.0), ("R", -1.0)):
         V, F, a = eyeball(EYE_CENTER * (sx, 1, 1))
         parts.append((f"eye_{side}", V, F, a, 0.0))
+        parts.append((f"conjunctiva_{side}", *conjunctiva(EYE_CENTER * (sx, 1, 1)), 0.0))
     parts += mouth_parts(z_front, MOUTH_Y - 1 * MM)
     return concatenate(parts)
 
