@@ -337,6 +337,51 @@ def test_contacts_push_back_penetration(sim):
     assert np.linalg.norm(dg - Hd) <= 1e-5 * np.linalg.norm(dg)
 
 
+def test_lids_slide_on_the_eyeballs(sim):
+    """The lids' inner layer is free and kept outside the eyeball by its sphere contact: the
+    contact's gradient and Hessian against finite differences, and pushing a lid vertex into
+    the eyeball gives an outward force."""
+    e = sim.collisions.eyes
+    X = sim.model.rest_positions
+    assert len(e) > 0 and np.all(e.rest_gap == 0.0) and len(e.terms(X, 0)[0]) == 0
+    assert np.all(sim.dof_of_vertex[e.v] >= 0)                      # free: they slide
+    gap, n, _ = e._gap(X)
+    Xp = X.copy()
+    Xp[e.v] -= (gap + 3e-4)[:, None] * n                              # 0.3 mm into the eyeball
+    v, E, g = e.terms(Xp, 1)
+    assert len(v) == len(e) and np.all(E > 0) and np.all(np.einsum("ci,ci->c", g, n) < 0)
+    rng = np.random.default_rng(7)
+    Xr = Xp + 5e-5 * rng.standard_normal(X.shape)
+    dX = rng.standard_normal(X.shape)
+    h = 1e-9
+    c = sim.collisions
+    fd = (c.energy(Xr + h * dX, np.eye(4)) - c.energy(Xr - h * dX, np.eye(4))) / (2 * h)
+    assert np.isclose(fd, np.sum(c.gradient(Xr, np.eye(4)) * dX), rtol=1e-5)
+    dg = (c.gradient(Xr + h * dX, np.eye(4)) - c.gradient(Xr - h * dX, np.eye(4))) / (2 * h)
+    Hd = np.zeros_like(X)
+    for pairs, B in c.blocks(Xr, np.eye(4)):
+        np.add.at(Hd, pairs[:, 0], np.einsum("pij,pj->pi", B, dX[pairs[:, 1]]))
+    assert np.linalg.norm(dg - Hd) <= 1e-5 * np.linalg.norm(dg)
+
+
+def test_blink_closes_one_eye_in_both_models(small_expressive_model):
+    """eyeBlink_L closes the left fissure in the rig (the lids rotated back onto the slit) and
+    the simulation follows it through the palpebral tracks; the right eye stays open.
+    (Measured: the simulation closes the fissure from 9.9 to 4.1 mm on this small head, to
+    1.5 mm on the default one.)"""
+    m = small_expressive_model
+
+    def fissure(x, side):
+        up, lo = m.curves[f"eye_{side}_upper"], m.curves[f"eye_{side}_lower"]
+        return np.linalg.norm(x[up[len(up) // 2]] - x[lo[len(lo) // 2]])
+
+    assert fissure(m.neutral, "L") > 0.008
+    for kind, closed in (("blendshape", 1e-6), ("simulation", 0.005)):
+        x = m.surface({"eyeBlink_L": 1.0}, kind=kind)
+        assert fissure(x, "L") < closed, (kind, fissure(x, "L"))
+        assert fissure(x, "R") > 0.008, kind
+
+
 def test_bad_activation_input(sim):
     with pytest.raises(InvfaceError, match="NaN|nan"):
         sim.solve({sim.muscle_names[0]: float("nan")})
@@ -379,7 +424,8 @@ def test_template_expression_blendshapes(small_expressive_model):
     stats = m.meta["blendshape_sims"]
     for name in m.blendshape_names:
         assert np.linalg.norm(m.blendshapes[m.blendshape_names.index(name)], axis=1).max() > 5e-4, name
-        assert abs(stats[name]["volume_change"]) < 0.01, name
+        if not stats[name].get("kinematic"):
+            assert abs(stats[name]["volume_change"]) < 0.01, name
 
     def moved(name, landmark):
         k = m.blendshape_names.index(name)

@@ -66,8 +66,11 @@ def add_blinks(model, closed):
     model.blendshape_names = list(model.blendshape_names) + names
     model.blendshapes = np.concatenate([model.blendshapes, np.array(deltas)])
     model.blendshape_activations = np.concatenate([model.blendshape_activations, np.array(acts)])
-    model.meta = {**model.meta, "blendshape_jaw": {**model.meta.get("blendshape_jaw", {}),
-                                                   **{n: [0.0] * 6 for n in names}}}
+    stats = {n: {"kinematic": True, "max_displacement_mm": float(np.linalg.norm(d, axis=1).max() * 1000)}
+             for n, d in zip(names, deltas)}
+    model.meta = {**model.meta,
+                  "blendshape_jaw": {**model.meta.get("blendshape_jaw", {}), **{n: [0.0] * 6 for n in names}},
+                  "blendshape_sims": {**model.meta.get("blendshape_sims", {}), **stats}}
     return model
 
 
