@@ -35,7 +35,8 @@ from .jaw import split_jaw
 from .curves import curve_set
 from .crop import crop_to_head
 from .landmarks import ear_boxes, find_landmarks, template_landmarks
-from .openings import ACROSS, MAX_INNER_FRACTION, closed_seams, inner_surfaces, map_openings, opening_centres
+from .openings import (ACROSS, MAX_INNER_FRACTION, closed_seams, inner_surfaces, lid_pairs, map_openings,
+                       opening_centres)
 from .surface import SurfacePoisson, morph_surface
 from .target import Target, clean, drop_faces
 from .units import settle_unit
@@ -249,7 +250,7 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
         across = {k for name in opened for k in ACROSS[name]}
         Ct, Cg = ({k: c for k, c in C.items() if k not in across} for C in (Ct, Cg))
     ears = ear_boxes(Va, Fg, L)
-    seams = closed_seams(template.neutral, template.triangles, TL, Va, Fg, L, opened)
+    seams = closed_seams(template.neutral, template.triangles, TL, Va, Fg, L, opened, lids=lid_pairs(template.curves))
     As, ts = scaling.similarity
     surf = morph_surface(template.neutral, template.triangles, Va, Fg, Ct, Cg, rims=(rid, rpos), no_snap=ears,
                          seams=seams, carried=template.neutral @ As.T + ts, progress=say)

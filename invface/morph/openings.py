@@ -134,13 +134,28 @@ def map_openings(Vt, Ft, TL, Vg, Fg, L):
     return ids, pos[first], names
 
 
-def closed_seams(Vt, Ft, TL, Vg, Fg, L, opened=(), tol=1e-7, reach=OPENING_REACH / 2):
-    """The template's closed slits as seams: pairs (P,2) of template vertex ids, the upper
-    and the lower side of the same slit point (they coincide in the template's neutral), of
-    every opening of OPENINGS where the aligned scan (Vg, Fg; landmarks L) is closed: not in
-    ``opened`` (those map onto a scan's rims) and with no hole of the scan within ``reach``
-    of the opening's centre (a hole whose rim could not be split at the corners is left to
-    the vertex-by-vertex snap, as before).
+def lid_pairs(curves):
+    """(P,2) template vertex ids of the two lids' facing points, corner to corner: the
+    interiors of the eye curves (``eye_L_upper`` with ``eye_L_lower``, and R), which are the
+    two sides of the lid slits; the template's eyes are open at rest, so these pairs do not
+    coincide as the lips' do."""
+    out = [np.zeros((0, 2), np.int64)]
+    for s in ("L", "R"):
+        up, lo = curves.get(f"eye_{s}_upper"), curves.get(f"eye_{s}_lower")
+        if up is not None and lo is not None and len(up) == len(lo) > 2:
+            out.append(np.stack([np.asarray(up)[1:-1], np.asarray(lo)[1:-1]], 1))
+    return np.concatenate(out).astype(np.int64)
+
+
+def closed_seams(Vt, Ft, TL, Vg, Fg, L, opened=(), tol=1e-7, reach=OPENING_REACH / 2, lids=None):
+    """The template's slits as seams to close: pairs (P,2) of template vertex ids, the upper
+    and the lower side of the same slit point (coincident in the template's neutral, as the
+    lips are, or given in ``lids`` (P,2), the open eyes' ``lid_pairs``), of every opening of
+    OPENINGS where the aligned scan (Vg, Fg; landmarks L) is closed: not in ``opened`` (those
+    map onto a scan's rims) and with no hole of the scan within ``reach`` of the opening's
+    centre (a hole whose rim could not be split at the corners is left to the
+    vertex-by-vertex snap, as before). A bust's sculpted eyes are closed in this sense: the
+    template's open lids are closed on them, and the carried eyeballs stay behind the skin.
 
     A scan whose eyes or lips are closed has no rim to map; snapped vertex by vertex, the two
     sides of the slit find different walls of the lip or lid line's groove and the slit tears
@@ -149,6 +164,8 @@ def closed_seams(Vt, Ft, TL, Vg, Fg, L, opened=(), tol=1e-7, reach=OPENING_REACH
     b = np.flatnonzero(boundary_vertices(Ft, len(Vt)))
     pairs = np.array(sorted(cKDTree(Vt[b]).query_pairs(tol)), np.int64).reshape(-1, 2)
     pairs = b[pairs]
+    if lids is not None and len(lids):
+        pairs = np.concatenate([pairs, np.asarray(lids, np.int64).reshape(-1, 2)])
     if not len(pairs):
         return pairs
     centres = opening_centres(TL)

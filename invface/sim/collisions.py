@@ -31,6 +31,9 @@ derivatives of that function (issue 25: with planes re-found during the solve, c
 warm solves of the same controls differed by 0.4 mm at a mouth corner, and the adjoint
 missed finite differences of cold solves by 7-35 %).
 
+The lids slide on the eyeballs through a separate, exact sphere contact (``EyeballContacts``):
+a lid crosses the whole eyeball when the eye closes, farther than a triangle's gate reaches.
+
 Limits: a vertex that slides more than about ``radius`` from where it was at rest leaves its
 triangles; the template's bone meshes are open sheets, so a lip dragged past the edge of the
 teeth has no contact there (issue 29 brings teeth).
