@@ -1,5 +1,6 @@
-"""Image RMS of a plate fit in the mouth (inside the outer lip curves) and in its opening
-(inside the inner lip curves), and over the face mask, from fit-plate run folders.
+"""Image RMS of a plate fit in the mouth (inside the outer lip curves), in its opening
+(inside the inner lip curves), in the eyes' openings (inside both lids' curves) and over the
+face mask, from fit-plate run folders.
 
     python bench/mouth_rms.py RUN_DIR [RUN_DIR ...]     # reads RUN_DIR/{blendshape,simulation}/fit.npz
 """
@@ -12,11 +13,15 @@ def masks(z):
     names = list(z["curve_names"])
     c = {n: z[f"curve_{i}"] for i, n in enumerate(names)}
     out = {}
-    for region, (up, lo) in {"mouth": ("lip_outer_upper", "lip_outer_lower"),
-                             "opening": ("lip_inner_upper", "lip_inner_lower")}.items():
-        poly = np.concatenate([c[up], c[lo][::-1]])
+    regions = {"mouth": [("lip_outer_upper", "lip_outer_lower")],
+               "opening": [("lip_inner_upper", "lip_inner_lower")],
+               "eyes": [("eye_L_upper", "eye_L_lower"), ("eye_R_upper", "eye_R_lower")]}
+    for region, pairs in regions.items():
         m = np.zeros(z["plate"].shape[:2], np.uint8)
-        cv2.fillPoly(m, [np.round(poly * 4).astype(np.int32)], 1, cv2.LINE_AA, shift=2)
+        for up, lo in pairs:
+            if up in c and lo in c:
+                poly = np.concatenate([c[up], c[lo][::-1]])
+                cv2.fillPoly(m, [np.round(poly * 4).astype(np.int32)], 1, cv2.LINE_AA, shift=2)
         out[region] = m.astype(bool)
     return out
 

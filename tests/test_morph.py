@@ -10,7 +10,7 @@ from invface.errors import MeshError
 from invface.mesh.closest import closest_points
 from invface.mesh.triangles import vertex_normals
 from invface.morph.blendshapes import read_blendshapes, recognised
-from invface.morph.build import build_model
+from invface.morph.build import build_model, inside_fraction
 from invface.morph.curvature import stencil_curvature
 from invface.morph.landmarks import template_landmarks
 from invface.morph.openings import OPENINGS, inner_surfaces, opening_centres, ordered_loops, split_loop
@@ -62,7 +62,10 @@ def test_round_trip(actors, small_expressive_model):
         assert res.stats["ear_boxes"] == 0 and res.stats["snapped_fraction"] > 0.9
         q = res.stats["quality"]
         assert q["inverted"] == 0 and q["min_volume_m3"] > 0
-        assert res.stats["centerlines_inside"] > 0.9
+        # as many centre-line points inside the flesh as in the template (0.88 on this small
+        # head: its lids over the eyeballs are one tet thick, and 3-point lines at 2/3)
+        own = inside_fraction(tpl.rest_positions, tpl.tets, np.concatenate([mu.centerline for mu in tpl.muscles]))
+        assert res.stats["centerlines_inside"] > own - 0.03, (res.stats["centerlines_inside"], own)
         # the new anatomy is not the template's
         assert np.abs(model.rest_positions - tpl.rest_positions).max() > 0.003
         emb = model.embedded_surface(model.rest_positions)

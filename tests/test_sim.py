@@ -196,8 +196,9 @@ def test_newton_converges_quadratically_on_smile(sim):
     # the last steps far faster than linear (a projected or shifted Hessian gives ratios of
     # 0.5-0.9); not cleanly quadratic, as the lip contacts' forces bend over 0.01 mm (their
     # Hessian along the last Newton step is 5 % off at 0.01 mm, 4e-6 at 0.001 mm): 0.08 and
-    # 0.01 here, on the teeth (without contacts 1e-4 and 3e-5)
-    assert res[-1] < 1e-6 and res[-1] < 0.1 * res[-2] and res[-2] < 0.1 * res[-3]
+    # 0.01 here, on the teeth (without contacts 1e-4 and 3e-5); 0.11 and 0.02 with the lids free
+    # on the eyeballs (no lid contact acts: the path changed)
+    assert res[-1] < 1e-6 and res[-1] < 0.1 * res[-2] and res[-2] < 0.15 * res[-3]
     # smile: the mouth corners move up and out (3.3 and 0.5 mm; 1.8 mm out over the skin
     # offset by the old depths, 12 mm under the zygoma, not the table's 7)
     x0 = sim.model.neutral[sim.model.landmarks["mouth_corner_L"]]

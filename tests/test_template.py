@@ -94,6 +94,11 @@ def test_the_eyes_are_open_over_the_eyeballs(small_model):
     # the eyeballs' spheres are what the lids slide on
     eye = m.parts.vertices[m.parts.part("eye_L")]
     assert np.allclose(np.linalg.norm(eye - EYE_CENTER, axis=1), EYE_RADIUS)
+    # the palpebral orbicularis lies in the lids, over the eyeball
+    palp = next(mu for mu in m.muscles if mu.name == "orbicularis_oculi_palpebralis_L")
+    c = m.rest_positions[m.tets[palp.tets]].mean(1)
+    r = np.linalg.norm(c - EYE_CENTER, axis=1)
+    assert len(palp.tets) >= 20 and np.median(r) < EYE_RADIUS + 0.005, (len(palp.tets), np.median(r))
 
 
 def test_landmarks_and_curves_lie_on_the_skin(small_model):

@@ -109,7 +109,8 @@ def generate(resolution=1.0, progress=None, expressions=True):
     jaw_w = np.clip(np.einsum("vk,vk->v", ew, vw[tets[etet]]), 0.0, 1.0)
 
     say("muscles")
-    muscles = build_muscles(X, tets, depth_of)
+    lid_slit = _lid_sides(coarse)[0]
+    muscles = build_muscles(X, tets, depth_of, warp=lambda P: open_lids(P, lid_slit, [], []))
 
     say("landmarks and curves")
     landmarks, curves = find_features(fine, Vf)

@@ -22,7 +22,7 @@ MUSCLES = {
     "procerus": ("M", [(0.0, 0.028, 0.9), (0.0, 0.042, 0.5), (0.0, 0.056, 0.2)], 0.0065, False),
     "orbicularis_oculi": ("pair", "ring:0.031,0.034,0.025,0.020,0.35", 0.0075, True),
     # the palpebral part (pretarsal and preseptal), in the lids, which slide on the eyeball
-    "orbicularis_oculi_palpebralis": ("pair", "ring:0.031,0.0335,0.016,0.011,0.35", 0.005, True),
+    "orbicularis_oculi_palpebralis": ("pair", "ring:0.031,0.0335,0.015,0.011,0.15", 0.005, True),
     "levator_labii_superioris_alaeque_nasi": ("pair", [(0.012, 0.036, 0.9), (0.014, 0.008, 0.5), (0.015, -0.019, 0.2)], 0.0045, False),
     "levator_labii_superioris": ("pair", [(0.025, 0.018, 0.9), (0.019, -0.004, 0.5), (0.012, -0.024, 0.2)], 0.0055, False),
     "zygomaticus_minor": ("pair", [(0.042, 0.012, 0.9), (0.030, -0.008, 0.5), (0.018, -0.026, 0.2)], 0.0045, False),
@@ -70,8 +70,11 @@ def _resample(poly, step=0.0005):
     return pts, tang / np.linalg.norm(tang, axis=1, keepdims=True)
 
 
-def build_muscles(X, tets, depth_of, min_tets=4):
-    """Muscle list for the flesh mesh X (N,3), tets (T,4). Returns [Muscle, ...]."""
+def build_muscles(X, tets, depth_of, min_tets=4, warp=None):
+    """Muscle list for the flesh mesh X (N,3), tets (T,4). Returns [Muscle, ...].
+
+    warp: optional map of centre-line points (n,3) -> (n,3) applied after they are placed on
+    the analytic skin: the flesh's own change from it (the lids opened, ``eyelids.open_lids``)."""
     from ..model.facemodel import Muscle
 
     centroids = X[tets].mean(1)
@@ -81,6 +84,8 @@ def build_muscles(X, tets, depth_of, min_tets=4):
         variants = [("M", ctrl)] if side == "M" else [("L", ctrl), ("R", ctrl * [-1, 1, 1])]
         for sd, c in variants:
             line = embed_points(c, depth_of)
+            if warp is not None:
+                line = warp(line)
             pts, tang = _resample(line)
             dist, idx = cKDTree(pts).query(centroids)
             sel = np.nonzero(dist < radius)[0]
