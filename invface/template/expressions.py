@@ -43,7 +43,7 @@ ACTION_UNITS = {
 # The lids' closing (AU45) is not simulated: the open lids are the flesh's stress-free rest
 # state, and closing them stretches the upper lid over 10 mm of eyeball, which the lids'
 # muscle ring does not do against the elastic flesh (it narrowed the fissure from 9.9 to
-# 7.3 mm at full activation, and a ring's inward pull vanishes as its arcs straighten).
+# 7.5 mm at full activation, and a ring's inward pull vanishes as its arcs straighten).
 # Each blink is the lids rotated back over the eyeball onto the closed slit they were opened
 # from (eyelids.open_lids), with the palpebral ring's activation recorded for Eq. 9's curve;
 # the simulation follows it through the palpebral tracks (Eq. 5).
