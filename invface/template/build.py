@@ -85,7 +85,8 @@ def generate(resolution=1.0, progress=None, expressions=True):
     R = layer_radii(coarse.r, r_inner, n_layers)
     X = np.concatenate([coarse.positions(R[k]) for k in range(n_layers + 1)])
     Ns = len(coarse.positions())
-    X = open_lids(X, *_lid_sides(coarse), column=np.arange(len(X)) % Ns)
+    lids = _lid_sides(coarse)
+    X = open_lids(X, *lids, column=np.arange(len(X)) % Ns)
     tets = orient(X, prism_tets(coarse.triangles, Ns, n_layers))
     q = quality_summary(X, tets)
     if q["inverted"] or q["min_dihedral_deg"] < MIN_DIHEDRAL_DEG or q["min_radius_ratio"] < MIN_RADIUS_RATIO:
@@ -109,8 +110,7 @@ def generate(resolution=1.0, progress=None, expressions=True):
     jaw_w = np.clip(np.einsum("vk,vk->v", ew, vw[tets[etet]]), 0.0, 1.0)
 
     say("muscles")
-    lid_slit = _lid_sides(coarse)[0]
-    muscles = build_muscles(X, tets, depth_of, warp=lambda P: open_lids(P, lid_slit, [], []))
+    muscles = build_muscles(X, tets, depth_of, warp=lambda P: open_lids(P, lids[0], [], []))
 
     say("landmarks and curves")
     landmarks, curves = find_features(fine, Vf)

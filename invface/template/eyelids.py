@@ -2,8 +2,8 @@
 
 The skin field closes the lids over each eyeball (``shape.head_field``) and the grid cuts a
 slit between them (``surfaces``). An adult face at rest shows a palpebral fissure about
-10 mm high: the upper lid's margin crosses the iris 1-2 mm above the pupil's centre line
-by about 4.5 mm and the lower lid's sits near the iris's lower edge, about 5 mm below it.
+10 mm high: the upper lid's margin lies about 4.5 mm above the pupil's centre (it covers
+the iris's top 1-2 mm) and the lower lid's near the iris's lower edge, about 5 mm below it.
 The lids slide over the eyeball as rotations about its centre, so the fissure is opened the
 same way: every point of a lid is turned about the horizontal axis through the eyeball's
 centre, upwards on the upper lid and downwards on the lower, by

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import grid
-from .shape import EYE_INNER, EYE_OUTER, MOUTH_CORNER, MOUTH_Y, skin_field
+from .shape import EYE_INNER, EYE_OUTER, MOUTH_CORNER, skin_field
 
 
 @dataclass
