@@ -32,9 +32,9 @@ def prism_tets(triangles, n_skin, n_layers):
     return np.concatenate(out)
 
 
-def embed_fine(coarse, fine, factor, X, tets, n_layers, Vf=None):
-    """Barycentric embedding of the fine skin's vertices Vf (default ``fine.positions()``) in
-    the coarse tet mesh.
+def embed_fine(coarse, fine, factor, X, tets, n_layers, Vf):
+    """Barycentric embedding of the fine skin's vertices Vf (Vf,3) (the grid's positions as
+    the build moved them: the lids opened) in the coarse tet mesh.
 
     Fine vertex (I, J) lies near coarse cell (I // f, J // f). The candidates are the tets of
     every layer under that cell and its 8 neighbours, never across a slit (a lip vertex is
@@ -44,7 +44,6 @@ def embed_fine(coarse, fine, factor, X, tets, n_layers, Vf=None):
     """
     ni, nj = coarse.shape
     fg = fine.vertex_grid()
-    Vf = fine.positions() if Vf is None else Vf
     n_grid_f = fine.shape[0] * fine.shape[1]
     dup_name = np.array([""] * n_grid_f + list(fine.dup_slit), dtype=object)
     ci = np.minimum(fg[:, 0] // factor, ni - 2)
