@@ -68,14 +68,27 @@ def closest_points(points, V, F, k=16):
     return _closest(points, V, F, k, tree)
 
 
-def _closest(points, V, F, k, tree):
+def candidate_points(points, V, F, k=16):
+    """The closest points on each of the k triangles with the nearest centroids to points
+    (P,3): triangle ids (P, k), barycentric weights (P, k, 3), distances (P, k)."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    V, F = np.asarray(V, float), np.asarray(F, np.int64)
+    k = min(k, len(F))
+    return _candidates(points, V, F, k, cKDTree(V[F].mean(1)))
+
+
+def _candidates(points, V, F, k, tree):
     _, cand = tree.query(points, k=k)
-    cand = cand.reshape(len(points), k).ravel()
+    cand = cand.reshape(len(points), k)
     P = np.repeat(points, k, axis=0)
-    tri = V[F[cand]]
+    tri = V[F[cand.ravel()]]
     w = closest_on_triangles(P, tri[:, 0], tri[:, 1], tri[:, 2])
-    q = np.einsum("pk,pki->pi", w, tri)
-    d = np.linalg.norm(q - P, axis=1).reshape(len(points), k)
+    d = np.linalg.norm(np.einsum("pk,pki->pi", w, tri) - P, axis=1)
+    return cand, w.reshape(len(points), k, 3), d.reshape(len(points), k)
+
+
+def _closest(points, V, F, k, tree):
+    cand, w, d = _candidates(points, V, F, k, tree)
     best = np.argmin(d, axis=1)
     rows = np.arange(len(points))
-    return (cand.reshape(-1, k)[rows, best], w.reshape(len(points), k, 3)[rows, best], d[rows, best])
+    return cand[rows, best], w[rows, best], d[rows, best]
