@@ -63,7 +63,7 @@ def volume_displacement(model, surface_displacement, keep_depth=MIN_DEPTH_FRACTI
     along the skin normal, and the field is solved again with both the skin and the
     corrected inner surface as Dirichlet data. Returns dX, ids and the count pushed.
     """
-    ids, S = outer_boundary(model)
+    ids, S = outer_boundary(model, apart=False)
     X0, tets = model.rest_positions, model.tets
     L = laplacian(X0, tets).tocsr()
     dX = harmonic(L, ids, S @ surface_displacement)

@@ -37,9 +37,12 @@ from ..model.rig import skin
 SEPARATING_OPENING = 0.3
 
 
-def outer_boundary(model):
+def outer_boundary(model, apart=True):
     """Outer-boundary tet vertices (B,) and the sparse correspondence S (B, V) with
-    dX[ids] = S @ dx for a surface displacement dx (V, ...)."""
+    dX[ids] = S @ dx for a surface displacement dx (V, ...). apart: tell the closed lips apart
+    (see the module's note), for displacements that part them (the blendshapes); without it a
+    vertex takes the nearest triangle at rest, which keeps the lips' contact faces together, as
+    a neutral-to-neutral morph (``morph.volume``) wants."""
     X0, tets = model.rest_positions, model.tets
     faces, _ = boundary_faces(tets)
     cand = np.unique(faces)
@@ -56,9 +59,9 @@ def outer_boundary(model):
     Xo = skin(X0[cand], model.volume_jaw_weights[cand], M)
     qo = np.einsum("pkj,pkji->pki", w, Vo[model.triangles[tri]])
     do = np.where(d <= tol, np.linalg.norm(qo - Xo[:, None], axis=2), np.inf)
-    best = np.argmin(do, axis=1)
+    best = np.argmin(do if apart else d, axis=1)
     rows = np.arange(len(cand))
-    on = do[rows, best] <= tol
+    on = (do if apart else d)[rows, best] <= tol
     if not on.any():
         raise InvfaceError("no tet-mesh boundary vertex lies on the render surface: the model's "
                            "embedding is broken (rebuild the model)")
