@@ -52,16 +52,17 @@ def outer_boundary(model, apart=True):
     cand = cand[~bone[cand]]
     tol = 0.25 * mean_edge_length(X0, tets)
     tri, w, d = candidate_points(X0[cand], model.neutral, model.triangles)
-    # the candidates within reach at rest, ranked by their distance with the jaw opened; a vertex
-    # is on the surface when the best of them is within reach there too
-    M = model.jaw_matrix(np.array([SEPARATING_OPENING, 0, 0, 0, 0, 0]))
-    Vo = skin(model.neutral, model.jaw_weights, M)
-    Xo = skin(X0[cand], model.volume_jaw_weights[cand], M)
-    qo = np.einsum("pkj,pkji->pki", w, Vo[model.triangles[tri]])
-    do = np.where(d <= tol, np.linalg.norm(qo - Xo[:, None], axis=2), np.inf)
-    best = np.argmin(do if apart else d, axis=1)
+    if apart:
+        # the candidates within reach at rest, ranked by their distance with the jaw opened; a
+        # vertex is on the surface when the best of them is within reach there too
+        M = model.jaw_matrix(np.array([SEPARATING_OPENING, 0, 0, 0, 0, 0]))
+        Vo = skin(model.neutral, model.jaw_weights, M)
+        Xo = skin(X0[cand], model.volume_jaw_weights[cand], M)
+        qo = np.einsum("pkj,pkji->pki", w, Vo[model.triangles[tri]])
+        d = np.where(d <= tol, np.linalg.norm(qo - Xo[:, None], axis=2), np.inf)
+    best = np.argmin(d, axis=1)
     rows = np.arange(len(cand))
-    on = (do if apart else d)[rows, best] <= tol
+    on = d[rows, best] <= tol
     if not on.any():
         raise InvfaceError("no tet-mesh boundary vertex lies on the render surface: the model's "
                            "embedding is broken (rebuild the model)")
