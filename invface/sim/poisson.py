@@ -17,8 +17,9 @@ Where the mouth is closed at rest both lips' surfaces meet at the slit, and a li
 lies on the other lip's render surface. So a vertex counts as on the surface only if it is also
 within reach with the jaw opened (``SEPARATING_OPENING``, where the lips are apart), and it takes
 the triangle nearest there. Taking the nearest at rest gave the lower lip's slit and contact-face
-vertices the upper lip's displacement: the embedded inner lower lip followed lowerLipDepress and
-lipsPart by a third of their motion (2.1 of 6.0 mm), 3.9 and 4.6 mm off on a photo's actor.
+vertices the upper lip's displacement: on the default head the field at the inner lower lip
+missed lowerLipDepress by 4.8 of its 6.0 mm, and upperLipRaise moved it 3.9 mm
+(``bench/tracks.py``).
 """
 from __future__ import annotations
 
