@@ -26,14 +26,21 @@ def masks(z):
     return out
 
 
-for folder in sys.argv[1:]:
-    for kind in ("blendshape", "simulation"):
-        try:
-            z = np.load(f"{folder}/{kind}/fit.npz")
-        except FileNotFoundError:
-            continue
-        d = z["render"] - z["plate"]
-        row = {k: (float(np.sqrt(np.mean(d[m] ** 2))), int(m.sum())) for k, m in masks(z).items()}
-        face = z["mask"].astype(bool) if "mask" in z.files else np.ones(d.shape[:2], bool)
-        row["face"] = (float(np.sqrt(np.mean(d[face] ** 2))), int(face.sum()))
-        print(folder, kind, " ".join(f"{k} {v[0]:.4f} ({v[1]} px)" for k, v in row.items()))
+def region_rms(fit_npz):
+    """{region: (image RMS, pixels)} of one kind's fit.npz: mouth, opening, eyes, face."""
+    z = np.load(fit_npz)
+    d = z["render"] - z["plate"]
+    row = {k: (float(np.sqrt(np.mean(d[m] ** 2))), int(m.sum())) for k, m in masks(z).items()}
+    face = z["mask"].astype(bool) if "mask" in z.files else np.ones(d.shape[:2], bool)
+    row["face"] = (float(np.sqrt(np.mean(d[face] ** 2))), int(face.sum()))
+    return row
+
+
+if __name__ == "__main__":
+    for folder in sys.argv[1:]:
+        for kind in ("blendshape", "simulation"):
+            try:
+                row = region_rms(f"{folder}/{kind}/fit.npz")
+            except FileNotFoundError:
+                continue
+            print(folder, kind, " ".join(f"{k} {v[0]:.4f} ({v[1]} px)" for k, v in row.items()))

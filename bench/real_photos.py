@@ -4,7 +4,8 @@
 
 Runs ``invface fit-plate PHOTO --model-kind both -o OUT/<name>`` for every JPEG/PNG in DIR
 (default ``../shared/data/real/photos``), then prints per photo and kind: curve RMS (px), curves
-within 2 px, the fit's seconds, the lips' volume change and every curve over 2 px. With
+within 2 px, the fit's seconds, the lips' volume change, the image RMS (linear) in the mouth
+(inside the outer lip curves) and over the face (``mouth_rms.py``) and every curve over 2 px. With
 ``--report-only`` it prints the table of an earlier run in OUT.
 """
 import argparse
@@ -13,6 +14,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+from mouth_rms import region_rms
 
 PHOTOS = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "photos"
 
@@ -27,8 +30,10 @@ def table(out):
             s = json.loads(f.read_text())
             by = s["curve_rms_px_by_curve"]
             over = ", ".join(f"{n} {v:.1f}" for n, v in sorted(by.items()) if v > 2)
+            img = region_rms(d / kind / "fit.npz")
             print(f"{d.name:16s} {kind:10s} {s['curve_rms_px']:.2f} px  {sum(v <= 2 for v in by.values())}/{len(by)}"
-                  f"  {s['seconds']['total']:5.1f} s  lips {100 * s['lip_volume_change']:+.1f} %  over 2 px: {over}")
+                  f"  {s['seconds']['total']:5.1f} s  lips {100 * s['lip_volume_change']:+.1f} %  image RMS mouth "
+                  f"{img['mouth'][0]:.4f} face {img['face'][0]:.4f}  over 2 px: {over}")
 
 
 def main():
