@@ -5,32 +5,19 @@ face mask, from fit-plate run folders.
     python bench/mouth_rms.py RUN_DIR [RUN_DIR ...]     # reads RUN_DIR/{blendshape,simulation}/fit.npz
 """
 import sys
-import cv2
+
 import numpy as np
 
-
-def masks(z):
-    names = list(z["curve_names"])
-    c = {n: z[f"curve_{i}"] for i, n in enumerate(names)}
-    out = {}
-    regions = {"mouth": [("lip_outer_upper", "lip_outer_lower")],
-               "opening": [("lip_inner_upper", "lip_inner_lower")],
-               "eyes": [("eye_L_upper", "eye_L_lower"), ("eye_R_upper", "eye_R_lower")]}
-    for region, pairs in regions.items():
-        m = np.zeros(z["plate"].shape[:2], np.uint8)
-        for up, lo in pairs:
-            if up in c and lo in c:
-                poly = np.concatenate([c[up], c[lo][::-1]])
-                cv2.fillPoly(m, [np.round(poly * 4).astype(np.int32)], 1, cv2.LINE_AA, shift=2)
-        out[region] = m.astype(bool)
-    return out
+from invface.fit.regions import curve_regions
 
 
 def region_rms(fit_npz):
     """{region: (image RMS, pixels)} of one kind's fit.npz: mouth, opening, eyes, face."""
     z = np.load(fit_npz)
     d = z["render"] - z["plate"]
-    row = {k: (float(np.sqrt(np.mean(d[m] ** 2))), int(m.sum())) for k, m in masks(z).items()}
+    names = list(z["curve_names"])
+    regions = curve_regions({n: z[f"curve_{i}"] for i, n in enumerate(names)}, d.shape[:2])
+    row = {k: (float(np.sqrt(np.mean(d[m] ** 2))), int(m.sum())) for k, m in regions.items()}
     face = z["mask"].astype(bool) if "mask" in z.files else np.ones(d.shape[:2], bool)
     row["face"] = (float(np.sqrt(np.mean(d[face] ** 2))), int(face.sum()))
     return row

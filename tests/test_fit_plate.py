@@ -294,8 +294,27 @@ def test_fit_plate_recovers_a_blendshape_plate(small_expressive_model, tmp_path,
     assert summary["kind"] == "blendshape" and set(summary["weights"]) == set(m.blendshape_names)
     from invface.report.fit import write_report
     page = write_report(tmp_path).read_text()
-    for pic in ("wipe.png", "error.png", "curves.png", "weights.png", "convergence.png", "mesh_error.png"):
+    for pic in ("wipe.png", "error.png", "curves.png", "mouth.png", "weights.png", "convergence.png", "mesh_error.png"):
         assert pic in page and (tmp_path / "blendshape" / pic).is_file()
+    by_region = summary["image_rms_by_region"]                 # the mouth's own figure, in the table too
+    assert set(by_region) == {"mouth", "opening", "eyes"} and f"{by_region['mouth']:.4f}" in page
+
+
+def test_curve_regions_and_their_image_rms():
+    from invface.fit.regions import curve_regions, region_rms
+    curves = {"lip_outer_upper": [(10, 30), (30, 20), (50, 30)], "lip_outer_lower": [(10, 30), (30, 40), (50, 30)],
+              "lip_inner_upper": [(20, 30), (30, 27), (40, 30)], "lip_inner_lower": [(20, 30), (30, 33), (40, 30)],
+              "eye_L_upper": [(5, 5), (10, 2), (15, 5)], "eye_L_lower": [(5, 5), (10, 8), (15, 5)]}
+    masks = curve_regions(curves, (60, 80))
+    assert set(masks) == {"mouth", "opening"}                  # the eyes need both lids of both eyes
+    mouth, opening = masks["mouth"], masks["opening"]
+    assert 400 <= mouth.sum() <= 450 and 60 <= opening.sum() <= 85     # the rhombi's areas + their edge pixels
+    assert not (opening & ~mouth).any() and mouth[30, 30] and not mouth[30, 5] and not mouth[15, 30]
+    plate, render = np.zeros((60, 80, 3)), np.zeros((60, 80, 3))
+    render[opening] = 0.3
+    rms = region_rms(render, plate, curves)
+    assert rms["opening"] == pytest.approx(0.3)
+    assert rms["mouth"] == pytest.approx(0.3 * np.sqrt(opening.sum() / mouth.sum()))
 
 
 def test_fit_plate_with_the_simulation_recovers_a_simulation_plate(small_expressive_model):

@@ -42,7 +42,9 @@ from .shading import fit_shading
 @dataclass
 class PlateFit(NamedControls):
     """Result of one plate: parameters p (K+6,), pose, posed surface (V, 3) m, the render
-    (H, W, 3) linear, per-curve pixel residuals, the log of both stages, seconds per stage."""
+    (H, W, 3) linear, per-curve pixel residuals, the image RMS (linear) over the plate and in
+    the regions its curves bound (mouth, its opening, the eyes), the log of both stages,
+    seconds per stage."""
 
     kind: str
     vector: FitVector
@@ -58,6 +60,7 @@ class PlateFit(NamedControls):
     activations: dict = field(default_factory=dict)
     lip_volume_change: float = 0.0
     status: str = ""
+    image_rms_by_region: dict = field(default_factory=dict)    # ``fit.regions.region_rms``
 
     @property
     def curve_rms_px(self):
@@ -75,7 +78,7 @@ class PlateFit(NamedControls):
                 "active_muscles": int(sum(v > 1e-2 for v in self.activations.values())),
                 "curve_rms_px": self.curve_rms_px,
                 "curve_rms_px_by_curve": {k: rms_px({k: v}) for k, v in sorted(self.residual_px.items())},
-                "image_rms": self.image_rms,
+                "image_rms": self.image_rms, "image_rms_by_region": self.image_rms_by_region,
                 "lip_volume_change": self.lip_volume_change, "seconds": self.seconds,
                 "history": self.history}
 
@@ -169,10 +172,12 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
         acts = {m.name: float(v) for m, v in zip(model.muscles, res.tracks.activations)}
         X = res.X
     seconds["total"] = time.perf_counter() - t0
+    from .regions import region_rms
     return PlateFit(kind=kind, vector=vec, p=p, rotation=rot, translation=tr, surface=xr, render=render,
                     residual_px=residual, image_rms=float(np.sqrt(np.mean((render - plate.image)[inside] ** 2))),
                     history=history, seconds=seconds, activations=acts,
-                    lip_volume_change=lip_volume_change(model, p, X), status=status)
+                    lip_volume_change=lip_volume_change(model, p, X), status=status,
+                    image_rms_by_region=region_rms(render, plate.image, curves))
 
 
 def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=None):

@@ -314,7 +314,9 @@ class FrameFit:
         worst = max(fit.residual_px, key=lambda k: rms_px({k: fit.residual_px[k]}), default=None)
         line = (f"{self.name} {kind}: {fit.seconds['total']:.1f} s, curves {fit.curve_rms_px:.2f} px RMS"
                 + (f" (worst {worst} {rms_px({worst: fit.residual_px[worst]}):.2f})" if worst else "") + ", "
-                f"image RMS {fit.image_rms:.4f}, {fit.nonzero_weights} non-zero weights, "
+                f"image RMS {fit.image_rms:.4f}"
+                + (f" (mouth {fit.image_rms_by_region['mouth']:.4f})" if "mouth" in fit.image_rms_by_region else "")
+                + f", {fit.nonzero_weights} non-zero weights, "
                 f"lip volume {100 * fit.lip_volume_change:+.2f} %")
         if kind in self.truth:
             t = self.truth[kind]

@@ -105,6 +105,38 @@ def _curves_overlay(path, plate_srgb, data):
     return _png(path, img / 255.0)
 
 
+def _mouth_closeup(path, plate_srgb, render_srgb, data, width=400):
+    """The mouth enlarged, plate | render, each with the plate's curves (green) and the
+    model's (red): whether the detector or the model is off is seen here, not in the whole
+    frame. None when the plate has no outer lip curves."""
+    import cv2
+    names = [str(n) for n in data.get("curve_names", [])]
+    outer = [data[f"curve_{names.index(n)}"] for n in ("lip_outer_upper", "lip_outer_lower") if n in names]
+    if len(outer) < 2:
+        return None
+    pts = np.concatenate(outer)
+    lo, hi = pts.min(0), pts.max(0)
+    pad = 0.25 * max(float(hi[0] - lo[0]), 1.0)
+    h, w = plate_srgb.shape[:2]
+    x0, y0 = (int(max(np.floor(v - pad), 0)) for v in lo)
+    x1, y1 = int(min(np.ceil(hi[0] + pad), w - 1)) + 1, int(min(np.ceil(hi[1] + pad), h - 1)) + 1
+    if x1 - x0 < 2 or y1 - y0 < 2:
+        return None
+    f = max(1, int(round(width / (x1 - x0))))
+    panels = []
+    for img in (plate_srgb, render_srgb):
+        big = cv2.resize((np.clip(img[y0:y1, x0:x1], 0, 1) * 255).astype(np.uint8), None, fx=f, fy=f,
+                         interpolation=cv2.INTER_CUBIC)
+        for i in range(len(names)):
+            for key, colour in ((f"curve_{i}", (40, 200, 40)), (f"model_curve_{i}", (220, 40, 40))):
+                if key in data and names[i].startswith("lip"):
+                    q = ((data[key] - [x0, y0] + 0.5) * f - 0.5) * 4     # pixel centres, 2 bits sub-pixel
+                    cv2.polylines(big, [np.round(q).astype(np.int32)], False, colour, 1, cv2.LINE_AA, shift=2)
+        panels.append(big)
+    gap = np.full((panels[0].shape[0], 4, 3), 255, np.uint8)
+    return _png(path, np.concatenate([panels[0], gap, panels[1]], 1) / 255.0)
+
+
 def _mesh_heat(path, data, summary):
     from ..render.preview import look_at_camera, render_meshes, to_srgb8
     x, F = data["surface"], data["triangles"]
@@ -170,6 +202,9 @@ def _fit_images(folder, quick=False):
         pics[f"per-pixel error (linear, black 0, white {scale:.3f}{where})"] = _png(folder / "error.png",
                                                                                   _heat(err, scale))
         pics["curves: plate (green), model (red)"] = _curves_overlay(folder / "curves.png", plate, data)
+        mouth = _mouth_closeup(folder / "mouth.png", plate, render, data)
+        if mouth:
+            pics["the mouth, plate | render: plate curves (green), model (red)"] = mouth
     if quick:
         return summary, pics
     pics["3D heat map"] = _mesh_heat(folder / "mesh_error.png", data, summary)
@@ -193,6 +228,9 @@ COMPARE = (("model", lambda s: s["kind"]),
            ("active muscles", lambda s: s.get("active_muscles", "-") if s.get("activations") else "-"),
            ("curve RMS (px)", lambda s: f"{s['curve_rms_px']:.2f}" if "curve_rms_px" in s else "-"),
            ("image RMS (linear)", lambda s: f"{s['image_rms']:.4f}" if "image_rms" in s else "-"),
+           ("image RMS in the mouth / its opening / the eyes",
+            lambda s: " / ".join(f"{s['image_rms_by_region'][k]:.4f}" if k in s.get("image_rms_by_region", {}) else "-"
+                                 for k in ("mouth", "opening", "eyes"))),
            ("seconds", lambda s: _seconds(s.get("seconds", 0))))
 
 
