@@ -39,6 +39,25 @@ def test_dogleg_box_step_does_not_crawl_along_a_bound():
     assert res.iterations <= 6 and res.status != "max_iter"
 
 
+def test_dogleg_curvature_scale_falls_where_the_cost_falls_faster_than_its_slope():
+    """A Gaussian well 1 - exp(-(x - 5)^2 / 2) with the curvature at its bottom (1) as the
+    model's: on the concave flank every Gauss-Newton step is a fraction of what the cost
+    allows and falls faster than linearly (c <= 0). There mu halves (it was held: 54
+    iterations, as without adapting)."""
+    from invface.fit.dogleg import NormalEquations
+
+    def well(x):
+        d = x[0] - 5.0
+        e = np.exp(-d * d / 2)
+        return NormalEquations(1 - e, np.array([d * e]), np.array([[1.0]]))
+    runs = {ad: dogleg(well, np.array([1.5]), max_iter=200, ftol=1e-12, gtol=1e-8, adapt_curvature=ad)
+            for ad in (False, True)}
+    for r in runs.values():
+        np.testing.assert_allclose(r.x, [5.0], atol=1e-6)
+    assert runs[False].iterations >= 50 and runs[True].iterations <= 25
+    assert [h["mu"] for h in runs[True].history[:4]] == [0.5, 0.25, 0.125, 0.0625]
+
+
 def test_dogleg_computes_derivatives_only_at_accepted_points():
     """A lazy NormalEquations: a rejected trial costs only its residual."""
     from invface.fit.dogleg import NormalEquations

@@ -148,8 +148,10 @@ def dogleg(fun, x0, lower=None, upper=None, max_iter=50, radius=1.0, ftol=1e-10,
     every step as the objective's curvature along the step relative to H,
     c = 2 (-g.p - actual decrease) / p.H.p (exact for a quadratic, as g is exact), and
     mu the geometric mean of its last value and c (one noisy step does not swing it), falling
-    by at most half per step; a step along which the cost fell faster than linearly (c <= 0)
-    says nothing about the curvature and leaves mu as it is. For an image with edges J^T J is
+    by at most half per step; after a step along which the cost fell at least as fast as its
+    slope said (c <= 0, rho >= 2 for a Gauss-Newton step) mu halves. (Holding mu there, the
+    open-mouth sample plate's simulation stage took 18 Gauss-Newton steps of rho 2.7-5.2, each
+    a third of what the cost allowed; halving, 11 steps to a lower cost.) For an image with edges J^T J is
     the curvature of sub-pixel motion: for steps of pixels it overestimates it, and plain
     Gauss-Newton steps fell short by half (rho ~ 2 at every step of a plate fit). Unbounded,
     mu swung from 0.3 to its floor 0.05 after such steps, and every third step overshot and
@@ -194,8 +196,9 @@ def dogleg(fun, x0, lower=None, upper=None, max_iter=50, radius=1.0, ftol=1e-10,
         pHp = p @ H @ p / mu
         if adapt_curvature and np.isfinite(cost_new) and pHp > 0:
             c = 2 * (-(g @ p) - actual) / pHp
-            if c > 0:
-                mu = float(np.clip(np.sqrt(mu * c), max(0.05, 0.5 * mu), 1.0))
+            # c <= 0: the cost fell at least as fast as its slope said, the model's curvature
+            # is too high along p by more than any c > 0 would say: mu falls by the most allowed
+            mu = float(np.clip(np.sqrt(mu * c) if c > 0 else 0.0, max(0.05, 0.5 * mu), 1.0))
         if rho < 0.25:
             radius = 0.25 * np.linalg.norm(p)
         elif rho > 0.75 and np.linalg.norm(p) >= 0.9 * radius:
