@@ -11,7 +11,7 @@ import numpy as np
 from invface.fit.regions import curve_regions
 
 
-def region_rms(fit_npz):
+def npz_region_rms(fit_npz):
     """{region: (image RMS, pixels)} of one kind's fit.npz: mouth, opening, eyes, face."""
     z = np.load(fit_npz)
     d = z["render"] - z["plate"]
@@ -27,7 +27,7 @@ if __name__ == "__main__":
     for folder in sys.argv[1:]:
         for kind in ("blendshape", "simulation"):
             try:
-                row = region_rms(f"{folder}/{kind}/fit.npz")
+                row = npz_region_rms(f"{folder}/{kind}/fit.npz")
             except FileNotFoundError:
                 continue
             print(folder, kind, " ".join(f"{k} {v[0]:.4f} ({v[1]} px)" for k, v in row.items()))

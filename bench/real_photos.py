@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from mouth_rms import region_rms
+from mouth_rms import npz_region_rms
 
 PHOTOS = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "photos"
 
@@ -30,7 +30,7 @@ def table(out):
             s = json.loads(f.read_text())
             by = s["curve_rms_px_by_curve"]
             over = ", ".join(f"{n} {v:.1f}" for n, v in sorted(by.items()) if v > 2)
-            img = region_rms(d / kind / "fit.npz")
+            img = npz_region_rms(d / kind / "fit.npz")
             print(f"{d.name:16s} {kind:10s} {s['curve_rms_px']:.2f} px  {sum(v <= 2 for v in by.values())}/{len(by)}"
                   f"  {s['seconds']['total']:5.1f} s  lips {100 * s['lip_volume_change']:+.1f} %  image RMS mouth "
                   f"{img['mouth'][0]:.4f} face {img['face'][0]:.4f}  over 2 px: {over}")

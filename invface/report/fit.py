@@ -93,15 +93,21 @@ def _convergence(path, history):
     return _figure(path, draw)
 
 
-def _curves_overlay(path, plate_srgb, data):
+def _draw_curves(img, data, names, origin=(0, 0), scale=1, prefix=""):
+    """Draw the plate's curves (green) and the model's (red) whose names start with ``prefix``
+    onto the uint8 image ``img``, in place; curve px are first taken to ``img``'s pixels by
+    the crop corner ``origin`` and the enlargement ``scale`` (pixel centres kept)."""
     import cv2
-    img = (np.clip(plate_srgb, 0, 1) * 255).astype(np.uint8).copy()
-    names = [str(n) for n in data.get("curve_names", [])]
-    for i in range(len(names)):
+    for i, name in enumerate(names):
         for key, colour in ((f"curve_{i}", (40, 200, 40)), (f"model_curve_{i}", (220, 40, 40))):
-            if key in data:
-                pts = np.round(data[key] * 4).astype(np.int32)      # 2 bits of sub-pixel precision
-                cv2.polylines(img, [pts], False, colour, 1, cv2.LINE_AA, shift=2)
+            if key in data and name.startswith(prefix):
+                q = ((data[key] - origin + 0.5) * scale - 0.5) * 4        # 2 bits of sub-pixel precision
+                cv2.polylines(img, [np.round(q).astype(np.int32)], False, colour, 1, cv2.LINE_AA, shift=2)
+
+
+def _curves_overlay(path, plate_srgb, data):
+    img = (np.clip(plate_srgb, 0, 1) * 255).astype(np.uint8).copy()
+    _draw_curves(img, data, [str(n) for n in data.get("curve_names", [])])
     return _png(path, img / 255.0)
 
 
@@ -127,11 +133,7 @@ def _mouth_closeup(path, plate_srgb, render_srgb, data, width=400):
     for img in (plate_srgb, render_srgb):
         big = cv2.resize((np.clip(img[y0:y1, x0:x1], 0, 1) * 255).astype(np.uint8), None, fx=f, fy=f,
                          interpolation=cv2.INTER_CUBIC)
-        for i in range(len(names)):
-            for key, colour in ((f"curve_{i}", (40, 200, 40)), (f"model_curve_{i}", (220, 40, 40))):
-                if key in data and names[i].startswith("lip"):
-                    q = ((data[key] - [x0, y0] + 0.5) * f - 0.5) * 4     # pixel centres, 2 bits sub-pixel
-                    cv2.polylines(big, [np.round(q).astype(np.int32)], False, colour, 1, cv2.LINE_AA, shift=2)
+        _draw_curves(big, data, names, origin=(x0, y0), scale=f, prefix="lip")
         panels.append(big)
     gap = np.full((panels[0].shape[0], 4, 3), 255, np.uint8)
     return _png(path, np.concatenate([panels[0], gap, panels[1]], 1) / 255.0)
