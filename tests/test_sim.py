@@ -338,6 +338,32 @@ def test_contacts_push_back_penetration(sim):
     assert np.linalg.norm(dg - Hd) <= 1e-5 * np.linalg.norm(dg)
 
 
+def test_contact_projection_lifts_only_the_contacts_negative_curvature(sim):
+    """Where the exact Newton matrix does not factor, Newton first projects each acting
+    contact's 12x12 Hessian to PSD with the flesh's terms exact: the correction added to the
+    exact matrix is PSD, touches only the acting contacts' vertices, and the contacts' part
+    of the corrected matrix is PSD where the exact one was not."""
+    c, pat = sim.collisions, sim.pattern
+    X, M = sim.model.rest_positions.copy(), np.eye(4)
+    rng = np.random.default_rng(7)
+    lips = np.unique(c.v[c.flesh])                             # lips and lids
+    X[lips] += 6e-4 * rng.standard_normal((len(lips), 3))      # pushed into each other
+    acting = c.acting(X, M)
+    assert acting.sum() > 10
+    delta = sim._contact_projection(X, M)
+    exact = pat.assemble(None, c.blocks(X, M))
+    rows = np.flatnonzero(np.abs(pat.matrix(delta, full=True)).sum(1).A1 > 0)
+    ids = np.unique(np.concatenate([c.v[acting], c.tri[acting].ravel(), c.eyes.terms(X, 0)[0]]))
+    dof = sim.dof_of_vertex[ids[ids < sim.N]]
+    touched = (3 * dof[dof >= 0, None] + np.arange(3)).ravel()
+    assert len(rows) > 0 and np.isin(rows, touched).all()
+    sub = lambda data: pat.matrix(data, full=True)[rows][:, rows].toarray()
+    scale = np.abs(sub(exact)).max()
+    assert np.linalg.eigvalsh(sub(exact)).min() < -1e-3 * scale
+    assert np.linalg.eigvalsh(sub(delta)).min() > -1e-9 * scale
+    assert np.linalg.eigvalsh(sub(exact + delta)).min() > -1e-9 * scale
+
+
 def test_lids_slide_on_the_eyeballs(sim):
     """The lids' inner layer is free and kept outside the eyeball by its sphere contact: the
     contact's gradient and Hessian against finite differences, and pushing a lid vertex into
