@@ -317,8 +317,13 @@ def test_curve_regions_and_their_image_rms():
     assert rms["mouth"] == pytest.approx(0.3 * np.sqrt(opening.sum() / mouth.sum()))
 
 
-def test_fit_plate_with_the_simulation_recovers_a_simulation_plate(small_expressive_model):
-    """The simulation stage starts from the blendshape stage and ends nearer the truth."""
+def test_fit_plate_with_the_simulation_recovers_a_simulation_plate(small_expressive_model, monkeypatch):
+    """The simulation stage starts from the blendshape stage, with its own first trust
+    radius, and ends nearer the truth."""
+    import invface.fit.dogleg as dl
+    from invface.fit.plate import SIMULATION_RADIUS
+    radii, dogleg = [], dl.dogleg
+    monkeypatch.setattr(dl, "dogleg", lambda *a, **k: radii.append(k["radius"]) or dogleg(*a, **k))
     m = small_expressive_model
     cam = _cam(200, 150)
     p, (x, xr) = _truth(m, "simulation")
@@ -328,6 +333,7 @@ def test_fit_plate_with_the_simulation_recovers_a_simulation_plate(small_express
     plate = Plate(image=image, camera=cam, path="synthetic")
     fit = fit_plate(m, plate, Calibration(gamma=g, albedo=a), curves, kind="simulation", max_iter_shading=15)
     assert [s for s in dict.fromkeys(h["stage"] for h in fit.history)] == ["curves", "shading-coarse", "shading-simulation"]
+    assert radii[-2:] == [1.0, SIMULATION_RADIUS] and SIMULATION_RADIUS > 1
     sim = [h["cost"] for h in fit.history if h["stage"] == "shading-simulation"]
     assert min(sim) <= sim[0] and fit.activations and max(fit.activations.values()) > 0.05
     _, shape = vertex_errors(m, fit, xr, {"rotation": ROT, "translation": TR})

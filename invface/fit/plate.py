@@ -39,6 +39,13 @@ from .results import NamedControls, write_fit_files
 from .shading import fit_shading
 
 
+# the simulation stage's first trust radius (``FitVector.scales()`` units): it starts where
+# the blendshape steps left the head, and from there its steps at radius 1, 2 and 4 were all
+# trusted (rho 0.9-1.3) on the five real photos: bench/RESULTS.md, "The simulation stage's
+# first trust radius"
+SIMULATION_RADIUS = 4.0
+
+
 @dataclass
 class PlateFit(NamedControls):
     """Result of one plate: parameters p (K+6,), pose, posed surface (V, 3) m, the render
@@ -135,14 +142,15 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     # mean other shapes; from there the open-mouth plate's simulation stage stalled at once)
     n = max_iter_shading
     final_ftol = 5e-3           # both kinds' last stage: a fair comparison, see the module doc
-    stages = [("shading-coarse", "blendshape", 2e-2, 1, n), ("shading", "blendshape", final_ftol, 0, n)] \
+    stages = [("shading-coarse", "blendshape", 2e-2, 1, n, 1.0), ("shading", "blendshape", final_ftol, 0, n, 1.0)] \
         if kind == "blendshape" else \
-        [("shading-coarse", "blendshape", 2e-2, 1, min(6, n)), ("shading-simulation", "simulation", final_ftol, 0, n)]
-    for stage, skind, ftol, level, iters in stages if shading else []:
+        [("shading-coarse", "blendshape", 2e-2, 1, min(6, n), 1.0),
+         ("shading-simulation", "simulation", final_ftol, 0, n, SIMULATION_RADIUS)]
+    for stage, skind, ftol, level, iters, radius in stages if shading else []:
         t1 = time.perf_counter()
         shade = dict(kind=skind, curves=curves, mask=plate.mask, max_iter=iters, spp=spp,
                      ftol=ftol, solver=solver, previous=previous, temporal=temporal_shading * temporal, level=level,
-                     progress=lambda h: say(dict(h, stage=stage)))
+                     radius=radius, progress=lambda h: say(dict(h, stage=stage)))
         try:
             sf = fit_shading(model, cam, plate.image, calibration.gamma, calibration.albedo, cf.p, rot, tr,
                              p0=p, **shade)

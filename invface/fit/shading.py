@@ -423,7 +423,7 @@ def without_eyes(mask, curves, shape):
 def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translation, kind="blendshape",
                 curves=None, lam1=EQ16_LAMBDA_1, lam2=EQ16_LAMBDA_2, mask=None, max_iter=25, p0=None,
                 solver="dogleg", ftol=5e-3, restarts=2, previous=None, temporal=0.0, progress=None, level=0,
-                **render):
+                radius=1.0, **render):
     """Solve Eq. 16 from the curve solution (p_hat (K+6,), rotation (3,), translation (3,)), or
     from p0 (K+6,) when given (p_hat stays the prior's centre).
 
@@ -440,7 +440,8 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     weight. level: 0 fits the plate's whole pyramid; 1 a coarse stage, the render at half the
     plate's resolution against the pyramid's lower levels (level 1 of the plate and below,
     their weight raised to the whole pyramid's), a quarter of the pixels to render and
-    differentiate. ``render`` options go to ``ShadingObjective`` (spp, silhouette_spp, seed,
+    differentiate. radius: the dogleg's first trust radius in ``FitVector.scales()`` units.
+    ``render`` options go to ``ShadingObjective`` (spp, silhouette_spp, seed,
     jacobian_spp, backplate: default the plate with the head filled in from its
     surroundings). Returns a ShadingFit."""
     from .dogleg import dogleg
@@ -457,8 +458,8 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
                            window=window, previous=previous, temporal=temporal, **render)
     # one unit of the optimiser's variables (``FitVector.scales``): the balance evens out the
     # curvature the solvers see; the size sets L-BFGS's first trial step and the dogleg's
-    # first trust radius (a unit step of a weight by 1 or the head by 0.1 rad overshot to
-    # costs 10-15x the start's)
+    # first trust radius (``radius``; from the curve solution a unit step of a weight by 1 or
+    # the head by 0.1 rad overshot to costs 10-15x the start's)
     s = vec.scales()
     lo, hi = vec.bounds()
     history, t0 = [], time.perf_counter()
@@ -479,7 +480,7 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
                 raise
             log(ne.cost)
             return _ScaledEquations(ne, s)
-        res = dogleg(fun, z0 / s, lo / s, hi / s, max_iter=max_iter, ftol=ftol, min_radius=1e-2,
+        res = dogleg(fun, z0 / s, lo / s, hi / s, max_iter=max_iter, radius=radius, ftol=ftol, min_radius=1e-2,
                      adapt_curvature=True)
         for h, step in zip(history[1:], res.history):       # the dogleg's verdict on each trial
             h.update(accepted=step["accepted"], rho=step["rho"], radius=step["radius"], mu=step["mu"])
