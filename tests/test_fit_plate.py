@@ -321,7 +321,7 @@ def test_fit_plate_with_the_simulation_recovers_a_simulation_plate(small_express
     """The simulation stage starts from the blendshape stage, with its own first trust
     radius, and ends nearer the truth."""
     import invface.fit.dogleg as dl
-    from invface.fit.plate import SIMULATION_RADIUS
+    from invface.fit.plate import COARSE_RADIUS, SIMULATION_RADIUS
     radii, dogleg = [], dl.dogleg
     monkeypatch.setattr(dl, "dogleg", lambda *a, **k: radii.append(k["radius"]) or dogleg(*a, **k))
     m = small_expressive_model
@@ -333,7 +333,7 @@ def test_fit_plate_with_the_simulation_recovers_a_simulation_plate(small_express
     plate = Plate(image=image, camera=cam, path="synthetic")
     fit = fit_plate(m, plate, Calibration(gamma=g, albedo=a), curves, kind="simulation", max_iter_shading=15)
     assert [s for s in dict.fromkeys(h["stage"] for h in fit.history)] == ["curves", "shading-coarse", "shading-simulation"]
-    assert radii[-2:] == [1.0, SIMULATION_RADIUS] and SIMULATION_RADIUS > 1
+    assert radii[-2:] == [COARSE_RADIUS, SIMULATION_RADIUS] and SIMULATION_RADIUS > 1
     sim = [h["cost"] for h in fit.history if h["stage"] == "shading-simulation"]
     assert min(sim) <= sim[0] and fit.activations and max(fit.activations.values()) > 0.05
     _, shape = vertex_errors(m, fit, xr, {"rotation": ROT, "translation": TR})

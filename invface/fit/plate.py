@@ -39,10 +39,12 @@ from .results import NamedControls, write_fit_files
 from .shading import fit_shading
 
 
-# the simulation stage's first trust radius (``FitVector.scales()`` units): it starts where
-# the blendshape steps left the head, and from there its steps at radius 1, 2 and 4 were all
-# trusted (rho 0.9-1.3) on the five real photos: bench/RESULTS.md, "The simulation stage's
-# first trust radius"
+# the first trust radii (``FitVector.scales()`` units) of the coarse blendshape stage and of
+# the simulation stage: on the five real photos the steps at radius 1, 2 and 4 were all
+# trusted (rho 0.9-1.3) and on the trust boundary; the last stage of the blendshape kind
+# keeps 1 (bench/RESULTS.md, "The simulation stage's first trust radius" and "The coarse
+# stage's first trust radius")
+COARSE_RADIUS = 4.0
 SIMULATION_RADIUS = 4.0
 
 
@@ -142,9 +144,9 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     # mean other shapes; from there the open-mouth plate's simulation stage stalled at once)
     n = max_iter_shading
     final_ftol = 5e-3           # both kinds' last stage: a fair comparison, see the module doc
-    stages = [("shading-coarse", "blendshape", 2e-2, 1, n, 1.0), ("shading", "blendshape", final_ftol, 0, n, 1.0)] \
+    stages = [("shading-coarse", "blendshape", 2e-2, 1, n, COARSE_RADIUS), ("shading", "blendshape", final_ftol, 0, n, 1.0)] \
         if kind == "blendshape" else \
-        [("shading-coarse", "blendshape", 2e-2, 1, min(6, n), 1.0),
+        [("shading-coarse", "blendshape", 2e-2, 1, min(6, n), COARSE_RADIUS),
          ("shading-simulation", "simulation", final_ftol, 0, n, SIMULATION_RADIUS)]
     for stage, skind, ftol, level, iters, radius in stages if shading else []:
         t1 = time.perf_counter()
