@@ -144,7 +144,8 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     # mean other shapes; from there the open-mouth plate's simulation stage stalled at once)
     n = max_iter_shading
     final_ftol = 5e-3           # both kinds' last stage: a fair comparison, see the module doc
-    stages = [("shading-coarse", "blendshape", 2e-2, 1, n, COARSE_RADIUS), ("shading", "blendshape", final_ftol, 0, n, 1.0)] \
+    stages = [("shading-coarse", "blendshape", 2e-2, 1, n, COARSE_RADIUS),
+              ("shading", "blendshape", final_ftol, 0, n, 1.0)] \
         if kind == "blendshape" else \
         [("shading-coarse", "blendshape", 2e-2, 1, min(6, n), COARSE_RADIUS),
          ("shading-simulation", "simulation", final_ftol, 0, n, SIMULATION_RADIUS)]
