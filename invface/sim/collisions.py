@@ -385,18 +385,24 @@ class Collisions:
     def blocks(self, X, M, project=False):
         """Hessian blocks [(pairs (P,2), B (P,3,3))] of the acting contacts over their flesh
         vertices (each contact's 12x12 Hessian projected to PSD when ``project``)."""
+        return self._blocks(X, M, (lambda H: project_psd(H) if len(H) else H) if project else (lambda H: H))
+
+    def projection_blocks(self, X, M):
+        """The blocks, as ``blocks``, that projecting each acting contact's Hessian to PSD adds
+        to its exact Hessian (each PSD): project_psd(H) - H."""
+        return self._blocks(X, M, lambda H: project_psd(H) - H if len(H) else H)
+
+    def _blocks(self, X, M, fix):
+        """``blocks`` with each contact's Hessian H (c,n,n) replaced by fix(H)."""
         m, (_, _, H) = self._active(X, M, 2)
-        if project and len(H):
-            H = project_psd(H)
+        H = fix(H)
         ids = np.concatenate([self.v[m, None], self.tri[m]], 1)
         a, b = np.meshgrid(np.arange(4), np.arange(4), indexing="ij")
         pairs = np.stack([ids[:, a.ravel()], ids[:, b.ravel()]], 2).reshape(-1, 2)
         B = H.reshape(-1, 4, 3, 4, 3).transpose(0, 1, 3, 2, 4).reshape(-1, 3, 3)
         keep = (pairs < self.n_vertices).all(1)
         v, _, _, He = self.eyes.terms(X, 2)
-        if project and len(He):
-            He = project_psd(He)
-        return [(pairs[keep], B[keep]), (np.stack([v, v], 1), He)]
+        return [(pairs[keep], B[keep]), (np.stack([v, v], 1), fix(He))]
 
     def jaw_derivative(self, X, M, dM):
         """d(energy gradient)/d(jaw parameter) (P,N,3) for jaw-transform derivatives dM (P,4,4):

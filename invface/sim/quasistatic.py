@@ -471,9 +471,7 @@ class Simulator:
     def _contact_projection(self, X, jm):
         """Newton matrix data (nnz,) to add to the exact matrix to project each acting
         contact's Hessian to PSD (the flesh's terms stay exact)."""
-        exact = self.collisions.blocks(X, jm)
-        proj = self.collisions.blocks(X, jm, project=True)
-        return self.pattern.assemble(None, [(pe, Bp - Be) for (pe, Be), (_, Bp) in zip(exact, proj)])
+        return self.pattern.assemble(None, self.collisions.projection_blocks(X, jm))
 
     def _line_search(self, X, dx, E, g, act, jm, tracks):
         """Backtracking Armijo on the energy (infinite for an inverted tet, so a step that
