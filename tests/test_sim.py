@@ -471,3 +471,42 @@ def test_template_expression_blendshapes(small_expressive_model):
         x = m.surface(blendshape_pose(m, name))
         gap = x[m.curves["lip_inner_upper"], 1].mean() - x[m.curves["lip_inner_lower"], 1].mean()
         assert gap > 0.004, name
+
+
+def test_newton_step_goes_to_the_projected_matrix_past_max_shift():
+    """Where H + mu diag|H| needs mu > MAX_SHIFT to factor, Newton takes the per-element
+    projected matrix instead of damping every direction, and the next step tries one shift,
+    MAX_SHIFT, before it: the shifts tried never pass MAX_SHIFT, and the step solves the
+    projected system."""
+    from types import SimpleNamespace
+    from invface.sim import linsolve
+
+    n = 4
+    H = np.diag([4.0, 3.0, 2.0, -1.0])              # needs mu >= 0.25 of diag|H| to factor
+    P = np.diag([4.0, 3.0, 2.0, 0.5])               # the "projected" matrix
+    tried = []
+
+    class Dense:
+        def factor(self, values):
+            A = values.reshape(n, n)
+            tried.append(A.copy())
+            if np.linalg.eigvalsh(A).min() <= 0:
+                raise linsolve.NotSPD("not SPD")
+            self.A = A
+
+        def solve(self, b):
+            return np.linalg.solve(self.A, b)
+
+    fake = SimpleNamespace(_solver=Dense(), pattern=SimpleNamespace(diag_slot=np.arange(n) * (n + 1)),
+                           collisions=None, MAX_SHIFT=Simulator.MAX_SHIFT, SMALL_SHIFT=Simulator.SMALL_SHIFT,
+                           _total=lambda *a, **k: (0.0, None, P.ravel().copy()))
+    g = np.ones(n)
+    secs = {"factor": 0.0, "solve": 0.0, "assembly": 0.0}
+    shift = [1e-4]
+    dx = Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, shift)
+    assert np.allclose(dx, -np.linalg.solve(P, g))
+    shifts = [A[3, 3] + 1.0 for A in tried[1:-1]]     # mu diag|H| added to -1 at the last entry
+    assert tried and max(shifts) <= Simulator.MAX_SHIFT * 1.0001 and shift[0] == 10 * Simulator.MAX_SHIFT
+    tried.clear()
+    Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, shift)
+    assert len(tried) == 3 and np.isclose(tried[1][3, 3] + 1.0, Simulator.MAX_SHIFT)   # exact, MAX_SHIFT, projected
