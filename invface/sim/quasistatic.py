@@ -19,10 +19,10 @@ a descent direction, it shifts the exact Hessian's diagonal (Levenberg-Marquardt
 falls back to the per-element definiteness-projected one: near a crushed tet the projected
 matrix converged linearly, with residuals stuck at 6e-5 for 40 iterations, where the shifted
 one converged in 8 (bench/RESULTS.md, issue 25); a shift above MAX_SHIFT, though, damps
-every direction, and there the projected matrix goes faster. Before a shift above SMALL_SHIFT it projects
-the acting contacts' 12x12 Hessians to PSD, the flesh's exact: every contact's Hessian is
-indefinite (its plane turns with the triangle), and a shift large enough to cover them damped
-every direction (a cold smile 18 -> 14 iterations). A
+every direction, and there the projected matrix goes faster. Before a shift above
+SMALL_SHIFT it projects the acting contacts' 12x12 Hessians to PSD, the flesh's exact:
+every contact's Hessian is indefinite (its plane turns with the triangle), and a shift large
+enough to cover them damped every direction (a cold smile 18 -> 14 iterations). A
 backtracking Armijo line search on E follows (it refuses inverting steps: E is infinite
 there). When Newton cannot reach the target from its start, the solve steps the inputs
 along the path from the start's (load stepping, ``Simulator.solve``).
@@ -115,7 +115,7 @@ class Simulator:
     SMALL_SHIFT = 1e-3      # Levenberg-Marquardt shifts above this come after the contacts' projection
     MAX_SHIFT = 1e-2        # the largest shift tried before the per-element projected matrix: 1.0 damped
                             # every direction (on real-photo controls the residual fell ~10 % per
-                            # iteration for a dozen iterations; 10 cold solves 215 -> 172 iterations)
+                            # iteration for a dozen iterations; bench/cold_solves.py 213 -> 169 iterations)
 
     def __init__(self, model, material: Material | None = None, contact=True,
                  contact_stiffness=None, solver=None):
