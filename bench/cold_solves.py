@@ -15,8 +15,6 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
-
 from invface.model import FitVector
 from invface.model.facemodel import FaceModel
 from invface.sim.driven import DrivenSimulation
@@ -36,8 +34,7 @@ def main():
             if not f.is_file():
                 continue
             s = json.loads(f.read_text())
-            p = vec.controls_vector(np.array([s["weights"].get(n, 0.0) for n in model.blendshape_names]),
-                                    np.array(s["jaw"]))
+            p = vec.from_dict(s, what=str(f))[vec.controls]
             ds = DrivenSimulation(model)
             t = time.perf_counter()
             r = ds.solve(p, warm=None).sim
