@@ -67,8 +67,13 @@ def _flesh_kernel(X, tets, G, vol, fptr, fdir, fact, prm, order, project, psi, g
                 grad[t, n, i] = V * (P[i, 0] * G[t, n, 0] + P[i, 1] * G[t, n, 1] + P[i, 2] * G[t, n, 2])
         if order == 1:
             continue
-        if project:
-            materials.project_element(H, 0.0)
+        if project and not materials.is_positive_definite(H, 1e-10 * np.abs(H).max()):
+            # the definiteness fix: each term's dP/dF with negative eigenvalues clamped, from
+            # its closed-form eigensystem (their sum is positive semi-definite)
+            H[:, :] = 0.0
+            materials.iso_projected(F, prm, 0.0, H)
+            for q in range(fptr[t], fptr[t + 1]):
+                materials.fibre_projected(F, fdir[q], fact[q], prm, H)
         HG = np.zeros((3, 3, 4, 3))            # HG[i, j, m, a] = sum_b H[ij, ab] G[m, b]
         for i in range(3):
             for j in range(3):

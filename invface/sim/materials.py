@@ -21,13 +21,16 @@ head a 0.45 rad jaw opening then drove Newton into a state where one lip tet had
 (J = 7e-9) and no step could lower the energy without inverting it. The barrier b(J) (zero
 for J >= ``barrier_start``, infinite at J = 0) makes every energy minimum inversion-free:
 the energy of an inverted element is +inf, which the line search rejects. The definiteness fix of
-Teran et al. is the per-element projection of dP/dF onto its non-negative eigenspace
-(``project_psd``), used when the exact Newton matrix is not positive definite.
+Teran et al. (2005) clamps the negative eigenvalues of dP/dF to zero; it is used when the exact
+Newton matrix is not positive definite. Each term is clamped through its closed-form
+eigensystem (``iso_projected``, ``fibre_projected``; no 9x9 eigensolver), and the sum of the
+clamped terms is positive semi-definite.
 
-The per-element kernels are numba functions (``iso_element``, ``fibre_element``,
-``project_element``) that the fused FVM kernel in ``fem.py`` calls for every tet in parallel;
-``isotropic``, ``fibre`` and ``project_psd`` apply them to whole arrays: F (T,3,3) -> (T,),
-(T,3,3), (T,9,9) in SI units (Pa). Index convention for 9-vectors: F[i, j] -> 3 i + j.
+The per-element kernels are numba functions (``iso_element``, ``fibre_element`` and their
+projected forms) that the fused FVM kernel in ``fem.py`` calls for every tet in parallel;
+``isotropic`` and ``fibre`` apply them to whole arrays: F (T,3,3) -> (T,), (T,3,3), (T,9,9) in
+SI units (Pa). Index convention for 9-vectors: F[i, j] -> 3 i + j. ``project_psd`` clamps
+general symmetric blocks with an eigensolver (the contacts' 12x12 Hessians).
 """
 from __future__ import annotations
 
@@ -178,19 +181,172 @@ def fibre_element(F, d, a, prm, order, P, H):
             P[i, j] += dpsi * g[3 * i + j]
     if order == 1:
         return psi
-    # d2 lam / dF2 = (d_ia d_j d_b - g_ij g_ab) / lam
+    _fibre_hessian(g, d, lam, ddpsi, dpsi, H)
+    return psi
+
+
+@nb.njit(**JIT)
+def _fibre_hessian(g, d, lam, c_g, c_t, H):
+    """Adds c_g g g^T + c_t d2 lam / dF2 to H (9,9): the fibre term's dP/dF is this with
+    c_g = psi'' and c_t = psi'. d2 lam / dF2 = (d_ia d_j d_b - g_ij g_ab) / lam, so g (unit) is an
+    eigenvector with eigenvalue c_g, the two directions u d^T with u orthogonal to F d have
+    c_t / lam, and the other six 0."""
     for i in range(3):
         for j in range(3):
             for a_ in range(3):
                 for b in range(3):
                     p, q = 3 * i + j, 3 * a_ + b
                     hl = ((i == a_) * d[j] * d[b] - g[p] * g[q]) / lam
-                    H[p, q] += ddpsi * g[p] * g[q] + dpsi * hl
-    return psi
+                    H[p, q] += c_g * g[p] * g[q] + c_t * hl
 
 
 @nb.njit(**JIT)
-def _is_positive_definite(H, shift):
+def fibre_projected(F, d, a, prm, H):
+    """Adds the fibre term's dP/dF with its negative eigenvalues clamped to 0 to H (9,9), from
+    the eigensystem in ``_fibre_hessian``: psi'' -> max(psi'', 0), psi' / lam -> max(psi', 0) / lam."""
+    Fd = F @ d
+    lam = max(math.sqrt(Fd[0] ** 2 + Fd[1] ** 2 + Fd[2] ** 2), 1e-12)
+    _, dpsi, ddpsi = fibre_curves(lam, a, prm)
+    g = np.empty(9)
+    for i in range(3):
+        for j in range(3):
+            g[3 * i + j] = Fd[i] * d[j] / lam
+    _fibre_hessian(g, d, lam, max(ddpsi, 0.0), max(dpsi, 0.0), H)
+
+
+@nb.njit(**JIT)
+def sym3_eigen(A, V):
+    """Eigen-decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations: on return A is
+    diagonal (the eigenvalues) and V (3,3) holds the unit eigenvectors as columns, a rotation.
+    A 9x9-free kernel: no LAPACK call, no allocation."""
+    for i in range(3):
+        for j in range(3):
+            V[i, j] = 1.0 if i == j else 0.0
+    for _ in range(50):
+        off = A[0, 1] ** 2 + A[0, 2] ** 2 + A[1, 2] ** 2
+        if off <= 1e-32 * (A[0, 0] ** 2 + A[1, 1] ** 2 + A[2, 2] ** 2 + off) or off == 0.0:
+            return
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            if A[p, q] == 0.0:
+                continue
+            theta = (A[q, q] - A[p, p]) / (2 * A[p, q])
+            t = (1.0 if theta >= 0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1))
+            c = 1 / math.sqrt(t * t + 1)
+            sn = t * c
+            for k in range(3):                  # A <- A R, then A <- R^T A, V <- V R
+                akp, akq = A[k, p], A[k, q]
+                A[k, p], A[k, q] = c * akp - sn * akq, sn * akp + c * akq
+            for k in range(3):
+                apk, aqk = A[p, k], A[q, k]
+                A[p, k], A[q, k] = c * apk - sn * aqk, sn * apk + c * aqk
+            for k in range(3):
+                vkp, vkq = V[k, p], V[k, q]
+                V[k, p], V[k, q] = c * vkp - sn * vkq, sn * vkp + c * vkq
+
+
+@nb.njit(**JIT)
+def rotation_svd(F, U, s, V):
+    """F (3,3) = U diag(s) V^T with U, V rotations and s sorted descending, s[2] < 0 when
+    det F < 0: V from the eigenvectors of F^T F (``sym3_eigen``), u_k = F v_k / s_k for the two
+    largest, u_2 = u_0 x u_1 (so a tiny s_2 costs no accuracy), s_2 = u_2 . F v_2."""
+    C, W, Fv = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            C[i, j] = F[0, i] * F[0, j] + F[1, i] * F[1, j] + F[2, i] * F[2, j]
+    sym3_eigen(C, W)
+    o0, o1, o2 = 0, 1, 2                        # eigenvalues in descending order
+    if C[o0, o0] < C[o1, o1]:
+        o0, o1 = o1, o0
+    if C[o1, o1] < C[o2, o2]:
+        o1, o2 = o2, o1
+    if C[o0, o0] < C[o1, o1]:
+        o0, o1 = o1, o0
+    for i in range(3):
+        V[i, 0], V[i, 1], V[i, 2] = W[i, o0], W[i, o1], W[i, o2]
+    if V[0, 0] * (V[1, 1] * V[2, 2] - V[2, 1] * V[1, 2]) - V[0, 1] * (V[1, 0] * V[2, 2] - V[2, 0] * V[1, 2]) \
+            + V[0, 2] * (V[1, 0] * V[2, 1] - V[2, 0] * V[1, 1]) < 0:
+        for i in range(3):
+            V[i, 2] = -V[i, 2]
+    for i in range(3):
+        for k in range(3):
+            Fv[i, k] = F[i, 0] * V[0, k] + F[i, 1] * V[1, k] + F[i, 2] * V[2, k]
+    for k in range(2):
+        if k == 1:                              # u_1 orthogonal to u_0 (Gram-Schmidt)
+            d = Fv[0, 1] * U[0, 0] + Fv[1, 1] * U[1, 0] + Fv[2, 1] * U[2, 0]
+            for i in range(3):
+                Fv[i, 1] -= d * U[i, 0]
+        n = math.sqrt(Fv[0, k] ** 2 + Fv[1, k] ** 2 + Fv[2, k] ** 2)
+        s[k] = n
+        for i in range(3):
+            U[i, k] = Fv[i, k] / n if n > 0 else (1.0 if i == k else 0.0)
+    U[0, 2] = U[1, 0] * U[2, 1] - U[2, 0] * U[1, 1]
+    U[1, 2] = U[2, 0] * U[0, 1] - U[0, 0] * U[2, 1]
+    U[2, 2] = U[0, 0] * U[1, 1] - U[1, 0] * U[0, 1]
+    s[2] = U[0, 2] * Fv[0, 2] + U[1, 2] * Fv[1, 2] + U[2, 2] * Fv[2, 2]
+
+
+@nb.njit(**JIT)
+def iso_projected(F, prm, floor, H):
+    """Adds the isotropic term's dP/dF with eigenvalues clamped to >= floor to H (9,9), from its
+    closed-form eigensystem (Teran et al. 2005, Smith et al. 2019), no 9x9 eigensolver.
+
+    With F = U diag(s) V^T, Psi is a function of s alone: Psi = mu10 sum s_i^2 + mu01 sum_{i<j}
+    s_i^2 s_j^2 + f(J), J = s0 s1 s2, f the volume terms. dP/dF splits into
+    - three scaling modes U diag(w) V^T, w the eigenvectors of the 3x3 Hessian in s:
+      d2/ds_i2 = 2 mu10 + 2 mu01 (s_j^2 + s_k^2) + f'' s_j^2 s_k^2,
+      d2/ds_i ds_j = 4 mu01 s_i s_j + f'' s_i s_j s_k^2 + f' s_k;
+    - per pair (i, j), k the third: the twist (u_i v_j^T - u_j v_i^T)/sqrt 2 with eigenvalue
+      (dPsi_i + dPsi_j)/(s_i + s_j) = 2 mu10 + 2 mu01 (s_k^2 + s_i s_j) + f' s_k, and the flip
+      (u_i v_j^T + u_j v_i^T)/sqrt 2 with (dPsi_i - dPsi_j)/(s_i - s_j) = 2 mu10 + 2 mu01 (s_k^2
+      - s_i s_j) - f' s_k: divided differences taken in closed form, so equal s_i cost nothing.
+    floor = -inf rebuilds the exact dP/dF. F must have det F > 0 (else H is left unchanged).
+    """
+    mu10, mu01, kappa = prm[0], prm[1], prm[2]
+    U, V, s = np.empty((3, 3)), np.empty((3, 3)), np.empty(3)
+    rotation_svd(F, U, s, V)
+    J = s[0] * s[1] * s[2]
+    if not J > 0.0:
+        return
+    _, b1, b2 = volume_barrier(J, prm[7], prm[8])
+    f1 = kappa * (J - 1) - (2 * mu10 + 4 * mu01) + b1
+    f2 = kappa + b2
+    A = np.empty((3, 3))
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        A[i, i] = 2 * mu10 + 2 * mu01 * (s[j] ** 2 + s[k] ** 2) + f2 * (s[j] * s[k]) ** 2
+        A[i, j] = A[j, i] = 4 * mu01 * s[i] * s[j] + f2 * s[i] * s[j] * s[k] ** 2 + f1 * s[k]
+    W = np.empty((3, 3))
+    sym3_eigen(A, W)
+    lam = np.empty(9)
+    Q = np.zeros((9, 9))                    # columns: unit eigenvectors as 9-vectors F[i, j] -> 3 i + j
+    r2 = 1 / math.sqrt(2.0)
+    for m in range(3):
+        lam[m] = A[m, m]
+        for i in range(3):
+            for j in range(3):
+                Q[3 * i + j, m] = U[i, 0] * W[0, m] * V[j, 0] + U[i, 1] * W[1, m] * V[j, 1] + U[i, 2] * W[2, m] * V[j, 2]
+    for k in range(3):
+        i, j = (k + 1) % 3, (k + 2) % 3
+        common = 2 * mu10 + 2 * mu01 * s[k] ** 2
+        lam[3 + k] = common + 2 * mu01 * s[i] * s[j] + f1 * s[k]       # twist
+        lam[6 + k] = common - 2 * mu01 * s[i] * s[j] - f1 * s[k]       # flip
+        for a in range(3):
+            for b in range(3):
+                x, y = U[a, i] * V[b, j], U[a, j] * V[b, i]
+                Q[3 * a + b, 3 + k] = r2 * (x - y)
+                Q[3 * a + b, 6 + k] = r2 * (x + y)
+    for m in range(9):
+        c = max(lam[m], floor)
+        if c == 0.0:
+            continue
+        for p in range(9):
+            cq = c * Q[p, m]
+            for q in range(9):
+                H[p, q] += cq * Q[q, m]
+
+
+@nb.njit(**JIT)
+def is_positive_definite(H, shift):
     """Cholesky test of H + shift I for a small symmetric matrix H (n,n)."""
     n = H.shape[0]
     L = np.zeros((n, n))
@@ -211,8 +367,9 @@ def _is_positive_definite(H, shift):
 
 @nb.njit(**JIT)
 def project_element(H, floor):
-    """Clamp the eigenvalues of the symmetric block H (n,n) to >= floor, in place."""
-    if floor == 0.0 and _is_positive_definite(H, 1e-10 * np.abs(H).max()):
+    """Clamp the eigenvalues of the symmetric block H (n,n) to >= floor, in place (eigensolver;
+    the contacts' 12x12 blocks, which have no closed form here)."""
+    if floor == 0.0 and is_positive_definite(H, 1e-10 * np.abs(H).max()):
         return     # eigenvalues >= -1e-10 |H|: clamping changes nothing that matters; no eigh
     w, Q = np.linalg.eigh(H)
     if w.min() >= floor:
@@ -223,16 +380,33 @@ def project_element(H, floor):
 
 
 @nb.njit(parallel=True, **JIT)
-def _batch(F, d, a, prm, order, fibre):
+def _project_batch(H, floor):
+    for t in nb.prange(H.shape[0]):
+        project_element(H[t], floor)
+
+
+def project_psd(H, floor=0.0):
+    """Copy of symmetric blocks H (T,n,n) with eigenvalues clamped to >= floor."""
+    H = np.array(H, float)
+    _project_batch(H, floor)
+    return H
+
+
+@nb.njit(parallel=True, **JIT)
+def _batch(F, d, a, prm, order, fibre, project):
     T = F.shape[0]
     psi = np.empty(T)
     P = np.zeros((T, 3, 3))
     H = np.zeros((T, 9, 9))
     for t in nb.prange(T):
         if fibre:
-            psi[t] = fibre_element(F[t], d[t], a[t], prm, order, P[t], H[t])
+            psi[t] = fibre_element(F[t], d[t], a[t], prm, min(order, 1) if project else order, P[t], H[t])
+            if project and order == 2:
+                fibre_projected(F[t], d[t], a[t], prm, H[t])
         else:
-            psi[t] = iso_element(F[t], prm, order, P[t], H[t])
+            psi[t] = iso_element(F[t], prm, min(order, 1) if project else order, P[t], H[t])
+            if project and order == 2:
+                iso_projected(F[t], prm, 0.0, H[t])
     return psi, P, H
 
 
@@ -240,28 +414,17 @@ def _out(psi, P, H, order):
     return psi, (P if order >= 1 else None), (H if order == 2 else None)
 
 
-def isotropic(F, m: Material, order=2):
-    """Mooney-Rivlin + quasi-incompressibility: psi (T,), P (T,3,3), dP/dF (T,9,9) or None."""
+def isotropic(F, m: Material, order=2, project=False):
+    """Mooney-Rivlin + quasi-incompressibility: psi (T,), P (T,3,3), dP/dF (T,9,9) or None;
+    ``project``: dP/dF with its negative eigenvalues clamped to 0 (``iso_projected``)."""
     F = np.ascontiguousarray(F, float)
     z = np.zeros((len(F), 3))
-    return _out(*_batch(F, z, z[:, 0], m.params(), order, False), order)
+    return _out(*_batch(F, z, z[:, 0], m.params(), order, False, project), order)
 
 
-def fibre(F, d, a, m: Material, order=2):
-    """Fibre term for fibres d (T,3) (unit, rest frame) at activations a (T,): psi, P, dP/dF."""
+def fibre(F, d, a, m: Material, order=2, project=False):
+    """Fibre term for fibres d (T,3) (unit, rest frame) at activations a (T,): psi, P, dP/dF
+    (``project``: clamped as ``fibre_projected``)."""
     F = np.ascontiguousarray(F, float)
     return _out(*_batch(F, np.ascontiguousarray(d, float), np.ascontiguousarray(a, float),
-                        m.params(), order, True), order)
-
-
-@nb.njit(parallel=True, **JIT)
-def _project_batch(H, floor):
-    for t in nb.prange(H.shape[0]):
-        project_element(H[t], floor)
-
-
-def project_psd(H, floor=0.0):
-    """Copy of symmetric blocks H (T,n,n) with eigenvalues clamped to >= floor (definiteness fix)."""
-    H = np.array(H, float)
-    _project_batch(H, floor)
-    return H
+                        m.params(), order, True, project), order)
