@@ -138,6 +138,16 @@ class FleshModel:
         return E, (grad if order >= 1 else None), (Ke if order == 2 else None)
 
 
+@nb.njit(parallel=True, **materials.JIT)
+def _gather_sum(ptr, src, values, out):
+    """out[s] = sum of values[src[ptr[s]:ptr[s + 1]]] for every slot s, in parallel."""
+    for s in nb.prange(len(ptr) - 1):
+        acc = 0.0
+        for k in range(ptr[s], ptr[s + 1]):
+            acc += values[src[k]]
+        out[s] = acc
+
+
 class Pattern:
     """Upper-triangular CSR sparsity pattern over free DOFs, built once and reused.
 
@@ -191,8 +201,11 @@ class Pattern:
                 m = (p != q) | (b >= a)
                 keep.append(t[m] * 144 + (3 * p[m] + a) * 12 + 3 * q[m] + b)
                 slot.append(block_slots(kb[m], a, b))
-        self.elem_keep = np.concatenate(keep)
-        self.elem_slot = np.concatenate(slot)
+        keep, slot = np.concatenate(keep), np.concatenate(slot)
+        # gathered per data slot (a stable sort: each slot sums in the element order)
+        order = np.argsort(slot, kind="stable")
+        self.elem_src = keep[order]
+        self.elem_ptr = np.searchsorted(slot[order], np.arange(self.nnz + 1))
         self.diag_slot = self.slots(np.arange(self.n), np.arange(self.n))
 
     def _block_entries(self, pairs):
@@ -221,7 +234,7 @@ class Pattern:
         """
         data = np.zeros(self.nnz)
         if Ke is not None:
-            data += np.bincount(self.elem_slot, Ke.reshape(-1)[self.elem_keep], minlength=self.nnz)
+            _gather_sum(self.elem_ptr, self.elem_src, Ke.reshape(-1), data)
         for pairs, B in blocks or []:
             if len(pairs) == 0:
                 continue

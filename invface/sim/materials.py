@@ -97,13 +97,26 @@ def _eps(i, j, k):
 
 
 @nb.njit(**JIT)
+def _mul(A, B, ta, tb):
+    """3x3 product op(A) op(B), op the transpose where ta / tb (no BLAS call per element)."""
+    out = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += (A[k, i] if ta else A[i, k]) * (B[j, k] if tb else B[k, j])
+            out[i, j] = acc
+    return out
+
+
+@nb.njit(**JIT)
 def iso_element(F, prm, order, P, H):
     """Mooney-Rivlin + quasi-incompressibility of one element. F (3,3); prm Material.params().
 
     Returns psi; adds the stress to P (3,3) when order >= 1 and dP/dF to H (9,9) when order 2.
     """
     mu10, mu01, kappa = prm[0], prm[1], prm[2]
-    C = F.T @ F
+    C = _mul(F, F, True, False)
     I1 = C[0, 0] + C[1, 1] + C[2, 2]
     I2 = 0.5 * (I1 * I1 - np.sum(C * C))
     cof = np.empty((3, 3))
@@ -122,13 +135,13 @@ def iso_element(F, prm, order, P, H):
         return psi
     sJ = kappa * (J - 1) - c + b1
     sJJ = kappa + b2
-    FC = F @ C
+    FC = _mul(F, C, False, False)
     for i in range(3):
         for j in range(3):
             P[i, j] += 2 * mu10 * F[i, j] + mu01 * (2 * I1 * F[i, j] - 2 * FC[i, j]) + sJ * cof[i, j]
     if order == 1:
         return psi
-    B = F @ F.T
+    B = _mul(F, F, False, True)
     # d2 I2 / dF_ij dF_ab = 2 [2 F_ij F_ab + I1 d_ia d_jb - d_ia C_bj - F_ib F_aj - B_ia d_jb];
     # d2 J / dF_ij dF_ab = eps_iak eps_jbn F_kn
     for i in range(3):
@@ -169,7 +182,8 @@ def fibre_element(F, d, a, prm, order, P, H):
 
     Returns psi; adds the stress to P and dP/dF to H as ``iso_element``.
     """
-    Fd = F @ d
+    Fd = np.array([F[0, 0] * d[0] + F[0, 1] * d[1] + F[0, 2] * d[2], F[1, 0] * d[0] + F[1, 1] * d[1] + F[1, 2] * d[2],
+                   F[2, 0] * d[0] + F[2, 1] * d[1] + F[2, 2] * d[2]])
     lam = max(math.sqrt(Fd[0] ** 2 + Fd[1] ** 2 + Fd[2] ** 2), 1e-12)
     psi, dpsi, ddpsi = fibre_curves(lam, a, prm)
     if order == 0:
@@ -204,7 +218,8 @@ def _fibre_hessian(g, d, lam, c_g, c_t, H):
 def fibre_projected(F, d, a, prm, H):
     """Adds the fibre term's dP/dF with its negative eigenvalues clamped to 0 to H (9,9), from
     the eigensystem in ``_fibre_hessian``: psi'' -> max(psi'', 0), psi' / lam -> max(psi', 0) / lam."""
-    Fd = F @ d
+    Fd = np.array([F[0, 0] * d[0] + F[0, 1] * d[1] + F[0, 2] * d[2], F[1, 0] * d[0] + F[1, 1] * d[1] + F[1, 2] * d[2],
+                   F[2, 0] * d[0] + F[2, 1] * d[1] + F[2, 2] * d[2]])
     lam = max(math.sqrt(Fd[0] ** 2 + Fd[1] ** 2 + Fd[2] ** 2), 1e-12)
     _, dpsi, ddpsi = fibre_curves(lam, a, prm)
     g = np.empty(9)
