@@ -4,7 +4,7 @@ import pytest
 from meshes import box_tets
 
 from invface.errors import InvfaceError, MeshError
-from invface.sim import materials
+from invface.sim import linsolve, materials
 from invface.sim.fem import Elements, FleshModel, Pattern
 from invface.sim.quasistatic import Simulator
 from invface.sim.tracks import MuscleTracks, Tracks, activation_slopes
@@ -536,3 +536,22 @@ def test_newton_step_goes_to_the_projected_matrix_past_max_shift():
     tried.clear()
     Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, shift)
     assert len(tried) == 3 and np.isclose(tried[1][3, 3] + 1.0, Simulator.MAX_SHIFT)   # exact, MAX_SHIFT, projected
+
+
+@pytest.mark.parametrize("name", linsolve.available())
+def test_solvers_solve_and_refuse_a_matrix_that_is_not_positive_definite(name):
+    """Newton's fallbacks hang on NotSPD: each solver solves an SPD matrix (several right-hand
+    sides), refuses the same matrix shifted indefinite, and factors the SPD one again after."""
+    import scipy.sparse as sps
+    n = 300
+    A = sps.random(n, n, 0.02, random_state=1)
+    A = (A + A.T + 5 * sps.eye(n)).tocsr()
+    P = linsolve.MatrixPattern(A)
+    solver = linsolve.make_solver(P, name)
+    b = np.random.default_rng(0).standard_normal((n, 3))
+    solver.factor(P.values(A))
+    assert np.abs(A @ solver.solve(b) - b).max() < 1e-10
+    with pytest.raises(linsolve.NotSPD):
+        solver.factor(P.values(A - 20 * sps.eye(n)))
+    solver.factor(P.values(A))
+    assert np.abs(A @ solver.solve(b) - b).max() < 1e-10
