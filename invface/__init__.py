@@ -13,9 +13,10 @@ Public API (stable names)::
     fit = invface.fit_plate("smile.png", calib, model=model, kinds="both")   # Eq. 15-16
     scan = invface.fit_scan("scan.ply", model=model)       # Eq. 13
 """
-from ._env import configure_llvm as _configure_llvm
+from ._env import configure_llvm as _configure_llvm, limit_openblas_threads as _limit_openblas_threads
 
 _configure_llvm()
+_limit_openblas_threads()
 
 from .errors import InvfaceError  # noqa: E402
 from .model import FaceModel, Muscle, Controls, FitVector, register_surface_model  # noqa: E402
