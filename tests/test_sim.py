@@ -541,7 +541,8 @@ def test_newton_step_goes_to_the_projected_matrix_past_max_shift():
 @pytest.mark.parametrize("name", linsolve.available())
 def test_solvers_solve_and_refuse_a_matrix_that_is_not_positive_definite(name):
     """Newton's fallbacks hang on NotSPD: each solver solves an SPD matrix (several right-hand
-    sides), refuses the same matrix shifted indefinite, and factors the SPD one again after."""
+    sides), refuses the same matrix shifted indefinite, and factors the SPD one again after;
+    a second solver of the pattern (PARDISO: with the first one's ordering) solves the same."""
     import scipy.sparse as sps
     n = 300
     A = sps.random(n, n, 0.02, random_state=1)
@@ -550,8 +551,13 @@ def test_solvers_solve_and_refuse_a_matrix_that_is_not_positive_definite(name):
     solver = linsolve.make_solver(P, name)
     b = np.random.default_rng(0).standard_normal((n, 3))
     solver.factor(P.values(A))
-    assert np.abs(A @ solver.solve(b) - b).max() < 1e-10
+    x = solver.solve(b)
+    assert np.abs(A @ x - b).max() < 1e-10
     with pytest.raises(linsolve.NotSPD):
         solver.factor(P.values(A - 20 * sps.eye(n)))
     solver.factor(P.values(A))
-    assert np.abs(A @ solver.solve(b) - b).max() < 1e-10
+    assert np.abs(solver.solve(b) - x).max() < 1e-10
+    assert name != "pardiso" or len(P.pardiso_perm) == n
+    second = linsolve.make_solver(P, name)
+    second.factor(P.values(A))
+    assert np.abs(second.solve(b) - x).max() < 1e-10

@@ -41,6 +41,9 @@ class PardisoSolver:
     name = "pardiso"
 
     def __init__(self, pattern):
+        """Symbolic analysis (phase 11) of ``pattern``. The fill-reducing ordering METIS finds is
+        kept on the pattern and handed to the next solver of the same pattern (iparm[4] = 1),
+        which then skips METIS: every SimResult's adjoint solver is such a second one."""
         self._lib = _pardiso_function()
         self.n = pattern.n
         self._ia = (pattern.indptr + 1).astype(np.int32)
@@ -52,8 +55,16 @@ class PardisoSolver:
         # 0.008 s, a factorisation the same. (The two-level factorisation, iparm[23] = 10,
         # factors 13 % faster but does not report a matrix that is not positive definite.)
         self._iparm[[0, 1, 9]] = 1, 2, 8
+        perm = getattr(pattern, "pardiso_perm", None)
+        self._iparm[4] = 2 if perm is None else 1       # 2: return METIS's ordering; 1: use ours
+        self._perm = np.zeros(self.n, np.int32) if perm is None else perm
         self._data = np.zeros(pattern.nnz)
-        self._call(11, np.zeros(self.n))
+        err, _ = self._call(11, np.zeros(self.n))
+        if err != 0:
+            raise InvfaceError(f"PARDISO analysis failed (error {err})")
+        if perm is None:
+            pattern.pardiso_perm = self._perm
+        self._iparm[4] = 0
 
     def _call(self, phase, b):
         b = np.asfortranarray(b, dtype=float)
@@ -66,7 +77,7 @@ class PardisoSolver:
                   ctypes.byref(ctypes.c_int32(2)), ctypes.byref(ctypes.c_int32(phase)),
                   ctypes.byref(ctypes.c_int32(self.n)), self._data.ctypes.data_as(f64),
                   self._ia.ctypes.data_as(i32), self._ja.ctypes.data_as(i32),
-                  np.zeros(0, np.int32).ctypes.data_as(i32),
+                  self._perm.ctypes.data_as(i32),
                   ctypes.byref(ctypes.c_int32(1 if b.ndim == 1 else b.shape[1])),
                   self._iparm.ctypes.data_as(i32), ctypes.byref(ctypes.c_int32(0)),
                   b.ctypes.data_as(f64), x.ctypes.data_as(f64), ctypes.byref(err))
