@@ -35,8 +35,9 @@ def limit_openblas_threads() -> bool:
     the cores from what runs next: a PARDISO factorisation right after a numpy matrix product
     took 0.08 s instead of 0.042 s, and replaying three photo fits' simulation solves took
     11.1-13.5 s instead of 7.8-9.2 s (bench/RESULTS.md). The simulation's own threads are
-    numba's and MKL's; numpy's products here are small. Sets the variable for libraries loaded later (and for Dask workers) and
-    limits the ones loaded already (threadpoolctl). Returns whether it limited anything.
+    numba's and MKL's; numpy's products here are small. Sets the variable for libraries
+    loaded later (and for Dask workers) and limits the ones loaded already (threadpoolctl).
+    Returns whether it limited anything.
     """
     if "OPENBLAS_NUM_THREADS" in os.environ:
         return False

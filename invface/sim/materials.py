@@ -232,8 +232,9 @@ def fibre_projected(F, d, a, prm, H):
 @nb.njit(**JIT)
 def sym3_eigen(A, V):
     """Eigen-decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations: on return A is
-    diagonal (the eigenvalues) and V (3,3) holds the unit eigenvectors as columns, a rotation.
-    A 9x9-free kernel: no LAPACK call, no allocation."""
+    diagonal (the eigenvalues) and V (3,3) holds the unit eigenvectors as columns (a product of
+    rotations). No LAPACK call and no allocation: numba's 3x3 LAPACK calls cost more than the
+    rest of the element kernel."""
     for i in range(3):
         for j in range(3):
             V[i, j] = 1.0 if i == j else 0.0
