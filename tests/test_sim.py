@@ -502,8 +502,8 @@ def test_template_expression_blendshapes(small_expressive_model):
 def test_newton_step_goes_to_the_projected_matrix_past_max_shift():
     """Where H + mu diag|H| needs mu > MAX_SHIFT to factor, Newton takes the per-element
     projected matrix instead of damping every direction, and the next step tries one shift,
-    MAX_SHIFT, before it: the shifts tried never pass MAX_SHIFT, and the step solves the
-    projected system."""
+    MAX_SHIFT, before it: the shifts tried run from SMALL_SHIFT to MAX_SHIFT, and the step
+    solves the projected system."""
     from types import SimpleNamespace
     from invface.sim import linsolve
 
@@ -532,7 +532,8 @@ def test_newton_step_goes_to_the_projected_matrix_past_max_shift():
     dx = Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, shift)
     assert np.allclose(dx, -np.linalg.solve(P, g))
     shifts = [A[3, 3] + 1.0 for A in tried[1:-1]]     # mu diag|H| added to -1 at the last entry
-    assert tried and max(shifts) <= Simulator.MAX_SHIFT * 1.0001 and shift[0] == 10 * Simulator.MAX_SHIFT
+    assert np.allclose(shifts, [Simulator.SMALL_SHIFT, Simulator.MAX_SHIFT])   # none below SMALL_SHIFT
+    assert shift[0] == 10 * Simulator.MAX_SHIFT
     tried.clear()
     Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, shift)
     assert len(tried) == 3 and np.isclose(tried[1][3, 3] + 1.0, Simulator.MAX_SHIFT)   # exact, MAX_SHIFT, projected

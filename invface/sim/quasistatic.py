@@ -112,7 +112,9 @@ class Simulator:
     material: Material constants; contact: include collision penalties; contact_stiffness
     (N/m; default 50 x shear modulus x mean edge length); solver: 'pardiso' | 'superlu' | None.
     """
-    SMALL_SHIFT = 1e-3      # Levenberg-Marquardt shifts above this come after the contacts' projection
+    SMALL_SHIFT = 1e-3      # the smallest Levenberg-Marquardt shift; larger ones come after the contacts'
+    #                         projection (in 162 fallback steps of bench/cold_solves.py, bench/sim.py and three
+    #                         photo-fit replays no shift below it ever factored: each was a failed factorisation)
     MAX_SHIFT = 1e-2        # the largest shift tried before the per-element projected matrix: 1.0 damped
                             # every direction (on real-photo controls the residual fell ~10 % per
                             # iteration for a dozen iterations; bench/cold_solves.py 213 -> 169 iterations)
@@ -423,7 +425,7 @@ class Simulator:
         """Newton direction: the exact Hessian H first; when it is not SPD or gives no descent
         direction, H + mu diag|H| (Levenberg-Marquardt) with mu from shift[0] / 10 (the last
         one that worked, kept in the one-element list ``shift``; 10 x MAX_SHIFT after the
-        projected matrix) raised 10x until it factors, up to MAX_SHIFT, with the contacts'
+        projected matrix), at least SMALL_SHIFT, raised 10x until it factors, up to MAX_SHIFT, with the contacts'
         Hessians projected to PSD before mu passes SMALL_SHIFT; then the per-element projected
         Hessian; then a scaled gradient step."""
         solver, diag = self._solver, self.pattern.diag_slot
@@ -446,7 +448,7 @@ class Simulator:
             return dx
         d = np.abs(data[diag])
         contacts = self.collisions is not None
-        mu = max(shift[0] / 10, 1e-6)
+        mu = max(shift[0] / 10, self.SMALL_SHIFT)
         while mu <= self.MAX_SHIFT:
             if contacts and mu > self.SMALL_SHIFT:
                 contacts = False
