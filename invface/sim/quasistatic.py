@@ -425,9 +425,9 @@ class Simulator:
         """Newton direction: the exact Hessian H first; when it is not SPD or gives no descent
         direction, H + mu diag|H| (Levenberg-Marquardt) with mu from shift[0] / 10 (the last
         one that worked, kept in the one-element list ``shift``; 10 x MAX_SHIFT after the
-        projected matrix), at least SMALL_SHIFT, raised 10x until it factors, up to MAX_SHIFT, with the contacts'
-        Hessians projected to PSD before mu passes SMALL_SHIFT; then the per-element projected
-        Hessian; then a scaled gradient step."""
+        projected matrix) but at least SMALL_SHIFT, raised 10x until it factors, up to
+        MAX_SHIFT, with the contacts' Hessians projected to PSD before mu passes SMALL_SHIFT;
+        then the per-element projected Hessian; then a scaled gradient step."""
         solver, diag = self._solver, self.pattern.diag_slot
 
         def direction(values):
