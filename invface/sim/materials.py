@@ -177,21 +177,30 @@ def fibre_curves(lam, a, prm):
 
 
 @nb.njit(**JIT)
+def _fibre_stretch(F, d):
+    """The fibre's stretch lam = |F d| (floored at 1e-12) and d lam / dF (9,) = (F d) d^T / lam."""
+    Fd = np.array([F[0, 0] * d[0] + F[0, 1] * d[1] + F[0, 2] * d[2], F[1, 0] * d[0] + F[1, 1] * d[1] + F[1, 2] * d[2],
+                   F[2, 0] * d[0] + F[2, 1] * d[1] + F[2, 2] * d[2]])
+    lam = max(math.sqrt(Fd[0] ** 2 + Fd[1] ** 2 + Fd[2] ** 2), 1e-12)
+    g = np.empty(9)
+    for i in range(3):
+        for j in range(3):
+            g[3 * i + j] = Fd[i] * d[j] / lam
+    return lam, g
+
+
+@nb.njit(**JIT)
 def fibre_element(F, d, a, prm, order, P, H):
     """Fibre term of one element for the unit rest fibre d (3,) at activation a (Eq. 4).
 
     Returns psi; adds the stress to P and dP/dF to H as ``iso_element``.
     """
-    Fd = np.array([F[0, 0] * d[0] + F[0, 1] * d[1] + F[0, 2] * d[2], F[1, 0] * d[0] + F[1, 1] * d[1] + F[1, 2] * d[2],
-                   F[2, 0] * d[0] + F[2, 1] * d[1] + F[2, 2] * d[2]])
-    lam = max(math.sqrt(Fd[0] ** 2 + Fd[1] ** 2 + Fd[2] ** 2), 1e-12)
+    lam, g = _fibre_stretch(F, d)
     psi, dpsi, ddpsi = fibre_curves(lam, a, prm)
     if order == 0:
         return psi
-    g = np.empty(9)                                        # d lam / dF
     for i in range(3):
         for j in range(3):
-            g[3 * i + j] = Fd[i] * d[j] / lam
             P[i, j] += dpsi * g[3 * i + j]
     if order == 1:
         return psi
@@ -218,14 +227,8 @@ def _fibre_hessian(g, d, lam, c_g, c_t, H):
 def fibre_projected(F, d, a, prm, H):
     """Adds the fibre term's dP/dF with its negative eigenvalues clamped to 0 to H (9,9), from
     the eigensystem in ``_fibre_hessian``: psi'' -> max(psi'', 0), psi' / lam -> max(psi', 0) / lam."""
-    Fd = np.array([F[0, 0] * d[0] + F[0, 1] * d[1] + F[0, 2] * d[2], F[1, 0] * d[0] + F[1, 1] * d[1] + F[1, 2] * d[2],
-                   F[2, 0] * d[0] + F[2, 1] * d[1] + F[2, 2] * d[2]])
-    lam = max(math.sqrt(Fd[0] ** 2 + Fd[1] ** 2 + Fd[2] ** 2), 1e-12)
+    lam, g = _fibre_stretch(F, d)
     _, dpsi, ddpsi = fibre_curves(lam, a, prm)
-    g = np.empty(9)
-    for i in range(3):
-        for j in range(3):
-            g[3 * i + j] = Fd[i] * d[j] / lam
     _fibre_hessian(g, d, lam, max(ddpsi, 0.0), max(dpsi, 0.0), H)
 
 
