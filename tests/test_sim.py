@@ -499,16 +499,18 @@ def test_template_expression_blendshapes(small_expressive_model):
         assert gap > 0.004, name
 
 
-def test_newton_step_goes_to_the_projected_matrix_past_max_shift():
-    """Where H + mu diag|H| needs mu > MAX_SHIFT to factor, Newton takes the per-element
-    projected matrix instead of damping every direction, and the next step tries one shift,
-    MAX_SHIFT, before it: the shifts tried run from SMALL_SHIFT to MAX_SHIFT, and the step
-    solves the projected system."""
+@pytest.mark.parametrize("contacts", [False, True])
+def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(contacts):
+    """Newton tries its matrices least altered first: the exact Hessian, then (with contacts)
+    the contact-projected one, then the Levenberg-Marquardt shifts, then the per-element
+    projected matrix; the next step starts one rung below the one that worked (no failed
+    factorisations of the rungs below that), and back at the exact Hessian once it works."""
     from types import SimpleNamespace
     from invface.sim import linsolve
 
     n = 4
     H = np.diag([4.0, 3.0, 2.0, -1.0])              # needs mu >= 0.25 of diag|H| to factor
+    C = np.diag([0.0, 0.0, 0.0, 0.5])               # what projecting the contacts adds: still not SPD
     P = np.diag([4.0, 3.0, 2.0, 0.5])               # the "projected" matrix
     tried = []
 
@@ -524,19 +526,34 @@ def test_newton_step_goes_to_the_projected_matrix_past_max_shift():
             return np.linalg.solve(self.A, b)
 
     fake = SimpleNamespace(_solver=Dense(), pattern=SimpleNamespace(diag_slot=np.arange(n) * (n + 1)),
-                           collisions=None, MAX_SHIFT=Simulator.MAX_SHIFT, SMALL_SHIFT=Simulator.SMALL_SHIFT,
+                           collisions=object() if contacts else None,
+                           SHIFTS=Simulator.SHIFTS, CONTACT_SHIFTS=Simulator.CONTACT_SHIFTS,
+                           _contact_projection=lambda X, jm: C.ravel().copy(),
                            _total=lambda *a, **k: (0.0, None, P.ravel().copy()))
+    fake._ladder = lambda: Simulator._ladder(fake)
+    ladder = fake._ladder()
+    shifts = Simulator.CONTACT_SHIFTS if contacts else Simulator.SHIFTS
+    assert ladder == [("exact", 0.0)] + ([("contacts", 0.0)] if contacts else []) \
+        + [("contacts" if contacts else "exact", mu) for mu in shifts] + [("projected", 0.0)]
     g = np.ones(n)
     secs = {"factor": 0.0, "solve": 0.0, "assembly": 0.0}
-    shift = [1e-4]
-    dx = Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, shift)
+    memory = [0]
+    dx = Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, memory)
     assert np.allclose(dx, -np.linalg.solve(P, g))
-    shifts = [A[3, 3] + 1.0 for A in tried[1:-1]]     # mu diag|H| added to -1 at the last entry
-    assert np.allclose(shifts, [Simulator.SMALL_SHIFT, Simulator.MAX_SHIFT])   # none below SMALL_SHIFT
-    assert shift[0] == 10 * Simulator.MAX_SHIFT
+    assert len(tried) == len(ladder) and memory[0] == len(ladder) - 1
+    base = H + C if contacts else H
+    for A, (kind, mu) in zip(tried[1:-1], ladder[1:-1]):      # mu diag|H| added to the last entry
+        assert np.isclose(A[3, 3], base[3, 3] + mu)
     tried.clear()
-    Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, shift)
-    assert len(tried) == 3 and np.isclose(tried[1][3, 3] + 1.0, Simulator.MAX_SHIFT)   # exact, MAX_SHIFT, projected
+    Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, memory)
+    assert len(tried) == 2 and np.isclose(tried[0][3, 3], base[3, 3] + shifts[-1])   # the last shift, projected
+    tried.clear()
+    SPD = np.diag([4.0, 3.0, 2.0, 1.0])
+    Simulator._newton_step(fake, None, None, None, None, SPD.ravel().copy(), g, secs, memory)
+    assert len(tried) == 1 and memory[0] == len(ladder) - 2       # the rung below worked
+    for _ in range(len(ladder)):
+        Simulator._newton_step(fake, None, None, None, None, SPD.ravel().copy(), g, secs, memory)
+    assert memory[0] == 0                                       # back at the exact Hessian
 
 
 @pytest.mark.parametrize("name", linsolve.available())

@@ -15,14 +15,17 @@ are fixed at set-up; Psi's volume barrier makes E infinite for an inverted tet).
 
 Each Newton step factorises the exact Hessian first (DESIGN.md: exact-first took 5
 iterations where always-projected took 23). When the factorisation fails or the step is not
-a descent direction, it shifts the exact Hessian's diagonal (Levenberg-Marquardt) before it
-falls back to the per-element definiteness-projected one: near a crushed tet the projected
-matrix converged linearly, with residuals stuck at 6e-5 for 40 iterations, where the shifted
-one converged in 8 (bench/RESULTS.md, issue 25); a shift above MAX_SHIFT, though, damps
-every direction, and there the projected matrix goes faster. Before a shift above
-SMALL_SHIFT it projects the acting contacts' 12x12 Hessians to PSD, the flesh's exact:
-every contact's Hessian is indefinite (its plane turns with the triangle), and a shift large
-enough to cover them damped every direction (a cold smile 18 -> 14 iterations). A
+a descent direction, it climbs a ladder of altered matrices (``Simulator._ladder``): with
+contacts, the exact Hessian with the acting contacts' 12x12 Hessians projected to PSD (every
+contact's Hessian is indefinite: its plane turns with the triangle), then that matrix with a
+Levenberg-Marquardt shift of its diagonal, then the per-element definiteness-projected
+matrix. A shift large enough to cover the contacts damped every direction (a cold smile 18
+-> 14 iterations); near a crushed tet the projected matrix converged linearly where a small
+shift converged in 8 (bench/RESULTS.md, issue 25); a shift above 1e-2 damps every direction,
+and there the projected matrix goes faster. The next step starts one rung below the one
+that worked: a failed factorisation costs as much as one that succeeds, and in ten cold
+solves at real-photo controls 215 of 383 factorisations failed when every step started from
+the exact Hessian (94 of 266 with the memory; bench/RESULTS.md, issue 30). A
 backtracking Armijo line search on E follows (it refuses inverting steps: E is infinite
 there). When Newton cannot reach the target from its start, the solve steps the inputs
 along the path from the start's (load stepping, ``Simulator.solve``).
@@ -112,12 +115,11 @@ class Simulator:
     material: Material constants; contact: include collision penalties; contact_stiffness
     (N/m; default 50 x shear modulus x mean edge length); solver: 'pardiso' | 'superlu' | None.
     """
-    SMALL_SHIFT = 1e-3      # the smallest Levenberg-Marquardt shift; larger ones come after the contacts'
-    #                         projection (in 162 fallback steps of bench/cold_solves.py, bench/sim.py and three
-    #                         photo-fit replays no shift below it ever factored: each was a failed factorisation)
-    MAX_SHIFT = 1e-2        # the largest shift tried before the per-element projected matrix: 1.0 damped
-                            # every direction (on real-photo controls the residual fell ~10 % per
-                            # iteration for a dozen iterations; bench/cold_solves.py 213 -> 169 iterations)
+    SHIFTS = (1e-3, 1e-2)       # Levenberg-Marquardt shifts of the exact Hessian (no contacts): in 162
+    #                             fallback steps no shift below 1e-3 ever factored, and 1.0 damped every
+    #                             direction (bench/cold_solves.py 213 -> 169 iterations with 1e-2 the last)
+    CONTACT_SHIFTS = (1e-2,)    # ... of the contact-projected one: 1e-3 before it gave 111 failed
+    #                             factorisations in bench/cold_solves.py where 1e-2 alone gave 94
 
     def __init__(self, model, material: Material | None = None, contact=True,
                  contact_stiffness=None, solver=None):
@@ -394,7 +396,7 @@ class Simulator:
         iterations before (a state the line search cannot leave; load stepping takes over)."""
         jm = self.model.jaw_matrix(jaw)
         residuals, ref, data = [], None, None
-        converged, it, E, shift = False, 0, np.inf, [1e-4]
+        converged, it, E, memory = False, 0, np.inf, [0]
         while True:
             t = time.perf_counter()
             E, g, data = self._total(X, act, jm, tracks, 2)
@@ -415,19 +417,27 @@ class Simulator:
             if converged or stalled or it >= max_iter:
                 break
             it += 1
-            dx = self._newton_step(X, act, jm, tracks, data, g, secs, shift)
+            dx = self._newton_step(X, act, jm, tracks, data, g, secs, memory)
             t = time.perf_counter()
             X = self._line_search(X, dx, E, g, act, jm, tracks)
             secs["line_search"] += time.perf_counter() - t
         return X, converged, it, residuals, E, data
 
-    def _newton_step(self, X, act, jm, tracks, data, g, secs, shift):
-        """Newton direction: the exact Hessian H first; when it is not SPD or gives no descent
-        direction, H + mu diag|H| (Levenberg-Marquardt) with mu from shift[0] / 10 (the last
-        one that worked, kept in the one-element list ``shift``; 10 x MAX_SHIFT after the
-        projected matrix) but at least SMALL_SHIFT, raised 10x until it factors, up to
-        MAX_SHIFT, with the contacts' Hessians projected to PSD before mu passes SMALL_SHIFT;
-        then the per-element projected Hessian; then a scaled gradient step."""
+    def _ladder(self):
+        """Newton matrices in the order the fallback tries them, least altered first: (kind,
+        Levenberg-Marquardt shift mu) with kind 'exact', 'contacts' (the acting contacts'
+        Hessians projected to PSD, the flesh's exact) or 'projected' (every element's)."""
+        if self.collisions is None:
+            shifts = [("exact", mu) for mu in self.SHIFTS]
+        else:
+            shifts = [("contacts", 0.0)] + [("contacts", mu) for mu in self.CONTACT_SHIFTS]
+        return [("exact", 0.0)] + shifts + [("projected", 0.0)]
+
+    def _newton_step(self, X, act, jm, tracks, data, g, secs, memory):
+        """Newton direction from the first matrix of ``_ladder`` that factors and gives a
+        descent direction, starting one rung below the one that worked last step (kept in the
+        one-element list ``memory``); a shifted matrix is M + mu diag|H| with H the exact
+        Hessian. When none works (a singular projected matrix), a scaled gradient step."""
         solver, diag = self._solver, self.pattern.diag_slot
 
         def direction(values):
@@ -443,38 +453,31 @@ class Simulator:
             secs["solve"] += time.perf_counter() - t
             return dx if dx @ g < 0 else None
 
-        dx = direction(data)
-        if dx is not None:
-            return dx
-        d = np.abs(data[diag])
-        contacts = self.collisions is not None
-        mu = max(shift[0] / 10, self.SMALL_SHIFT)
-        while mu <= self.MAX_SHIFT:
-            if contacts and mu > self.SMALL_SHIFT:
-                contacts = False
+        base = {"exact": data}
+
+        def matrix(kind):
+            if kind not in base:
                 t = time.perf_counter()
-                data = data + self._contact_projection(X, jm)
+                if kind == "contacts":
+                    base[kind] = data + self._contact_projection(X, jm)
+                else:
+                    base[kind] = self._total(X, act, jm, tracks, 2, project=True)[2]
                 secs["assembly"] += time.perf_counter() - t
-                dx = direction(data)
-                if dx is not None:
-                    shift[0] = self.SMALL_SHIFT
-                    return dx
-            shifted = data.copy()
-            shifted[diag] += mu * d
-            dx = direction(shifted)
+            return base[kind]
+
+        ladder = self._ladder()
+        for rung in range(max(memory[0] - 1, 0), len(ladder)):
+            kind, mu = ladder[rung]
+            values = matrix(kind)
+            if mu:
+                values = values.copy()
+                values[diag] += mu * np.abs(data[diag])
+            dx = direction(values)
             if dx is not None:
-                shift[0] = mu
+                memory[0] = rung
                 return dx
-            mu *= 10
-        t = time.perf_counter()
-        _, _, data = self._total(X, act, jm, tracks, 2, project=True)
-        secs["assembly"] += time.perf_counter() - t
-        dx = direction(data)
-        if dx is not None:
-            shift[0] = 10 * self.MAX_SHIFT
-            return dx
-        # even the projected matrix failed (singular): fall back to a scaled gradient step
-        return -g / (np.abs(data[diag]).max() + 1e-30)
+        memory[0] = len(ladder)
+        return -g / (np.abs(base["projected"][diag]).max() + 1e-30)
 
     def _contact_projection(self, X, jm):
         """Newton matrix data (nnz,) to add to the exact matrix to project each acting
