@@ -163,6 +163,11 @@ class Simulator:
         self._solver = self.make_solver()                                # symbolic analysis once
         # force scale for the absolute convergence floor: shear x edge^2 per vertex
         self.force_scale = shear * self.edge_length ** 2
+        # the rest state's energy and Newton matrix: a check, and the compiled kernels loaded and
+        # their thread pool started here (0.2 s once per process), not in the first solve
+        E, _, _ = self._total(X0, np.zeros(len(self.muscle_names)), np.eye(4), None, 2)
+        if not np.isfinite(E):
+            raise MeshError("the rest state's energy is not finite (a degenerate or inverted tet)")
 
     # -- inputs ---------------------------------------------------------------------------
     def activation_vector(self, activations):
