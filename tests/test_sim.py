@@ -579,3 +579,24 @@ def test_solvers_solve_and_refuse_a_matrix_that_is_not_positive_definite(name):
     second = linsolve.make_solver(P, name)
     second.factor(P.values(A))
     assert np.abs(second.solve(b) - x).max() < 1e-10
+
+
+def test_contact_gates_do_not_narrow_below_the_minimum_radius(small_model, monkeypatch):
+    """Contacts pair and gate over 1.5 tet edges, but never less than MIN_CONTACT_RADIUS (a
+    refined mesh's edges would narrow them): with the minimum set above 1.5 edges of the small
+    model, every pair's gate reaches the minimum, and the pairs are a superset of those 1.5
+    edges find."""
+    from invface.sim import quasistatic
+    from invface.sim.collisions import MIN_CONTACT_RADIUS
+
+    narrow = Simulator(small_model)
+    assert narrow.collisions.radius == pytest.approx(1.5 * narrow.edge_length)
+    assert narrow.collisions.radius > MIN_CONTACT_RADIUS
+    wide_radius = 2.0 * narrow.collisions.radius
+    monkeypatch.setattr(quasistatic, "MIN_CONTACT_RADIUS", wide_radius)
+    wide = Simulator(small_model)
+    assert wide.collisions.radius == wide_radius
+    assert np.all(wide.collisions.reach[:, 1] == wide_radius)
+    pairs = lambda c: set(zip(c.v.tolist(), map(tuple, c.tri.tolist())))
+    assert len(wide.collisions) > len(narrow.collisions)
+    assert pairs(narrow.collisions) <= pairs(wide.collisions)

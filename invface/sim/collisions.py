@@ -48,6 +48,11 @@ from ..mesh.triangles import face_normals, group_offsets, vertex_normals
 from .materials import project_psd
 
 CONTACT_SMOOTHING = 2e-5     # m: the cubic onset of the contact penalty
+MIN_CONTACT_RADIUS = 0.006   # m: the narrowest pairing radius and gate the simulator uses. 1.5 tet
+#                              edges is 9.1 mm on the default head and 5.8 mm at resolution 4 (a jaw
+#                              opening converges in 12 and 10 Newton iterations); on the meshes refined
+#                              from them (4.5 and 2.9 mm) the opening's residual wandered for 10 and
+#                              more than 14 iterations as lips slid from gate to gate (bench/RESULTS.md)
 
 
 def penalty(gap, k, d=CONTACT_SMOOTHING):

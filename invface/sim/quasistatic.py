@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import InvfaceError, MeshError, SimulationError
 from ..mesh.tets import face_use, mean_edge_length
 from . import linsolve
-from .collisions import Collisions
+from .collisions import MIN_CONTACT_RADIUS, Collisions
 from .fem import Elements, FleshModel, Pattern
 from .materials import Material
 from .tracks import Tracks
@@ -156,7 +156,10 @@ class Simulator:
         self.collisions = None
         if contact:
             k = contact_stiffness or 50.0 * shear * self.edge_length
-            self.collisions = Collisions(model, ~constrained, k, radius=1.5 * self.edge_length)
+            # contacts pair and gate over 1.5 tet edges, but never less than MIN_CONTACT_RADIUS:
+            # a gate that narrows with the mesh hands a sliding lip from plane to plane abruptly
+            self.collisions = Collisions(model, ~constrained, k,
+                                         radius=max(1.5 * self.edge_length, MIN_CONTACT_RADIUS))
         pairs = self.collisions.coupled_pairs() if self.collisions else None
         self.pattern = Pattern(dof, tets, pairs)
         self._solver_name = solver
