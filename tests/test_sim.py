@@ -600,3 +600,9 @@ def test_contact_gates_do_not_narrow_below_the_minimum_radius(small_model, monke
     pairs = lambda c: set(zip(c.v.tolist(), map(tuple, c.tri.tolist())))
     assert len(wide.collisions) > len(narrow.collisions)
     assert pairs(narrow.collisions) <= pairs(wide.collisions)
+
+
+def test_simulator_refuses_material_constants_without_a_finite_rest_energy(small_model):
+    """A NaN material constant is named at set-up, not met as NaN residuals in the first solve."""
+    with pytest.raises(InvfaceError, match="material constants"):
+        Simulator(small_model, material=materials.Material(mu10=float("nan")))

@@ -169,8 +169,9 @@ class Simulator:
         # the rest state's energy and Newton matrix: a check, and the compiled kernels loaded and
         # their thread pool started here (0.2 s once per process), not in the first solve
         E, _, _ = self._total(X0, np.zeros(len(self.muscle_names)), np.eye(4), None, 2)
-        if not np.isfinite(E):
-            raise MeshError("the rest state's energy is not finite (a degenerate or inverted tet)")
+        if not np.isfinite(E):        # Elements has refused inverted and degenerate tets already
+            raise InvfaceError(f"the rest state's energy is {E}: check the material constants "
+                               f"{self.material.as_dict()}")
 
     # -- inputs ---------------------------------------------------------------------------
     def activation_vector(self, activations):
