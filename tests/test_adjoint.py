@@ -172,6 +172,31 @@ def test_a_state_that_is_not_a_stable_equilibrium_has_no_derivatives(driven):
     saddle = dataclasses.replace(r.sim, newton_data=-r.sim.newton_data, _solver=None)
     with pytest.raises(SimulationError, match="not a stable equilibrium"):
         Sensitivity(driven, dataclasses.replace(r, sim=saddle)).tangent()
+    # the adjoint's conjugate gradients meet the negative curvature and hand over to the same check
+    assert saddle._newton_factor is not None
+    with pytest.raises(SimulationError, match="not a stable equilibrium"):
+        Sensitivity(driven, dataclasses.replace(r, sim=saddle)).gradient(np.ones_like(r.X))
+
+
+def test_a_gradient_right_after_a_solve_reuses_the_last_newton_factorisation(driven):
+    """Issue 30: an adjoint solve at a fresh solution makes no factorisation. Conjugate
+    gradients on the exact matrix there, preconditioned with the last Newton step's factorised
+    exact Hessian, agree with the matrix's own factorisation; once the simulator has factorised
+    something else, the result falls back to its own factorisation, with the same gradient."""
+    import dataclasses
+    p, r = _state(driven)
+    assert r.sim._newton_factor is not None and r.sim._solver is None
+    gX = np.random.default_rng(4).standard_normal(r.X.shape)
+    g_cg = Sensitivity(driven, r).gradient(gX)
+    assert r.sim._solver is None                                # no factorisation was made
+    own = dataclasses.replace(r, sim=dataclasses.replace(r.sim, _newton_factor=None))
+    g_own = Sensitivity(driven, own).gradient(gX)
+    assert own.sim._solver is not None
+    assert np.abs(g_cg - g_own).max() <= 1e-9 * np.abs(g_own).max()
+    driven.solve(0.5 * p, warm=None)                            # the simulator factorises again
+    g_later = Sensitivity(driven, r).gradient(gX)
+    assert r.sim._solver is not None
+    assert np.abs(g_later - g_own).max() <= 1e-12 * np.abs(g_own).max()
 
 
 def test_surface_models_share_one_interface_and_the_bridge_matches_the_adjoint(small_expressive_model):

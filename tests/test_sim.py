@@ -529,8 +529,10 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
                            collisions=object() if contacts else None,
                            SHIFTS=Simulator.SHIFTS, CONTACT_SHIFTS=Simulator.CONTACT_SHIFTS,
                            _contact_projection=lambda X, jm: C.ravel().copy(),
-                           _total=lambda *a, **k: (0.0, None, P.ravel().copy()))
+                           _total=lambda *a, **k: (0.0, None, P.ravel().copy()),
+                           _factorisations=0, _exact_factor=-1)
     fake._ladder = lambda: Simulator._ladder(fake)
+    fake._factor = lambda values: Simulator._factor(fake, values)
     ladder = fake._ladder()
     shifts = Simulator.CONTACT_SHIFTS if contacts else Simulator.SHIFTS
     assert ladder == [("exact", 0.0)] + ([("contacts", 0.0)] if contacts else []) \
@@ -541,6 +543,7 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
     dx = Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, memory)
     assert np.allclose(dx, -np.linalg.solve(P, g))
     assert len(tried) == len(ladder) and memory[0] == len(ladder) - 1
+    assert fake._factorisations == len(tried) and fake._exact_factor == -1   # no exact factorisation held
     base = H + C if contacts else H
     for A, (kind, mu) in zip(tried[1:-1], ladder[1:-1]):      # mu diag|H| added to the last entry
         assert np.isclose(A[3, 3], base[3, 3] + mu)
@@ -554,6 +557,30 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
     for _ in range(len(ladder)):
         Simulator._newton_step(fake, None, None, None, None, SPD.ravel().copy(), g, secs, memory)
     assert memory[0] == 0                                       # back at the exact Hessian
+    assert fake._exact_factor == fake._factorisations          # ... and its factorisation held
+
+
+def test_preconditioned_cg_solves_with_a_nearby_factorisation_and_refuses_indefinite_matrices():
+    """The adjoint's conjugate gradients (sim.linsolve.preconditioned_cg): preconditioned by the
+    factorisation of a matrix 1 % away, they reach rtol 1e-12 in a few iterations; on an
+    indefinite matrix, or when the iterations run out, they return None."""
+    import scipy.sparse as sps
+    n = 200
+    A = sps.random(n, n, 0.03, random_state=2)
+    A = (A + A.T + 6 * sps.eye(n)).tocsr()
+    near = (A + 0.01 * sps.diags(np.random.default_rng(1).uniform(-1, 1, n)) @ A).toarray()
+    near = 0.5 * (near + near.T)
+    calls = []
+
+    def precondition(r):
+        calls.append(1)
+        return np.linalg.solve(near, r)
+
+    b = np.random.default_rng(0).standard_normal(n)
+    x = linsolve.preconditioned_cg(lambda v: A @ v, precondition, b, rtol=1e-12)
+    assert np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b) and len(calls) <= 8
+    assert linsolve.preconditioned_cg(lambda v: -(A @ v), precondition, b) is None
+    assert linsolve.preconditioned_cg(lambda v: A @ v, lambda r: r, b, max_iter=2) is None
 
 
 @pytest.mark.parametrize("name", linsolve.available())

@@ -11,7 +11,8 @@ with p = (b, j). dr/dp collects
   * the collision planes on the jaw, which move rigidly with it.
 Tangent mode solves all K+6 right-hand sides with one factorisation (the Jacobian Dogleg
 needs); adjoint mode solves H mu = dL/dX^U once and contracts mu with dr/dp term by term,
-so a gradient costs one back-substitution whatever K is.
+so a gradient costs one adjoint solve whatever K is: a few back-substitutions with the last
+Newton step's factorisation (``SimResult.solve_adjoint``), no factorisation of its own.
 
 Collisions: the contact energy (sim.collisions) is a C2 function of the flesh positions and
 the jaw transform, and its full Hessian is in the Newton matrix H, so with the jaw
@@ -52,13 +53,18 @@ class Sensitivity:
         self.active = sim.flesh.active_forces(X)                               # (Q,4,3)
         col = sim.collisions
         self.dcontact = col.jaw_derivative(X, jm, dM) if col is not None else np.zeros((6, self.N, 3))
-        _, _, self.Ke = sim.flesh.evaluate(X, result.sim.activations, 2)       # exact element stiffness
+        # exact element stiffness of the tets on the jaw's constrained vertices: the only ones
+        # whose stiffness meets dX^C/dj (H_UC dX^C/dj, and mu . H_UC dX^C/dj)
+        self.jaw_tets = np.flatnonzero(np.isin(sim.elements.tets, j).any(1))
+        self.Ke = sim.flesh.stiffness(X, result.sim.activations, self.jaw_tets)
         self.free = sim.free
 
     # -- pieces of dr/dp ------------------------------------------------------------------
     def _stiffness_times(self, V):
-        """Full-mesh element stiffness times displacements V (N,3) -> (N,3) (flesh only)."""
-        tets = self.sim.elements.tets
+        """Element stiffness times displacements V (N,3) -> (N,3) (flesh only), summed over the
+        tets on the jaw's constrained vertices: exact for a V that is zero elsewhere (dX^C/dj),
+        and on those vertices for any V."""
+        tets = self.sim.elements.tets[self.jaw_tets]
         z = np.einsum("tab,tb->ta", self.Ke, V[tets].reshape(len(tets), 12)).reshape(-1, 3)
         out = np.zeros((self.N, 3))
         np.add.at(out, tets.reshape(-1), z)
@@ -144,7 +150,7 @@ def cold_finite_differences(driven, p, gx, rtol=1e-10):
 
 def activation_gradient(sim, result, gX):
     """dLoss/da (M,) at a Simulator's equilibrium (jaw and tracks held) for dLoss/dX = gX
-    (N,3): one adjoint solve H mu = gX^U with the factorised Newton matrix at the solution,
+    (N,3): one adjoint solve H mu = gX^U with the exact Newton matrix at the solution,
     then dLoss/da_m = -mu . dr/da_m, dr/da_m the active fibre forces of muscle m per unit
     activation (Eq. 4). The muscle-level gradient of paper 000 Sec. 7, without the
     blendshape-driven tracks (``Sensitivity`` has those); what the paper-scale bench times."""
@@ -153,10 +159,10 @@ def activation_gradient(sim, result, gX):
 
 
 def _adjoint_state(sim, result, gX):
-    """mu (N,3): H mu = gX^U on the free DOFs (H the factorised Newton matrix of the SimResult
-    ``result``), zero on the constrained vertices."""
+    """mu (N,3): H mu = gX^U on the free DOFs (H the exact Newton matrix of the SimResult
+    ``result``: ``SimResult.solve_adjoint``), zero on the constrained vertices."""
     mu = np.zeros_like(gX)
-    mu[sim.free] = result.solver.solve(gX[sim.free].reshape(-1)).reshape(-1, 3)
+    mu[sim.free] = result.solve_adjoint(gX[sim.free].reshape(-1)).reshape(-1, 3)
     return mu
 
 

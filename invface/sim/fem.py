@@ -137,6 +137,21 @@ class FleshModel:
         E = float(psi.sum())
         return E, (grad if order >= 1 else None), (Ke if order == 2 else None)
 
+    def stiffness(self, X, act, tets):
+        """Exact element stiffness (len(tets),12,12) of the tets ``tets`` (indices) at positions
+        X (N,3) m with muscle activations act (M,): ``evaluate``'s, on a subset of the mesh."""
+        el = self.el
+        tets = np.asarray(tets, np.int64)
+        lo, n = self.fptr[tets], np.diff(self.fptr)[tets]          # each tet's fibre entries
+        fptr = np.concatenate([[0], np.cumsum(n)])
+        q = np.repeat(lo - fptr[:-1], n) + np.arange(fptr[-1])
+        a = np.asarray(act, float)[self.fmus[q]]
+        Ke = np.empty((len(tets), 12, 12))
+        _flesh_kernel(np.ascontiguousarray(X, float), el.tets[tets], el.G[tets], el.volume[tets], fptr,
+                      self.fdirs[q], a, self.prm, 2, False, np.empty(len(tets)),
+                      np.empty((len(tets), 4, 3)), Ke)
+        return Ke
+
 
 @nb.njit(parallel=True, **materials.JIT)
 def _gather_sum(ptr, src, values, out):

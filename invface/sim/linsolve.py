@@ -129,6 +129,35 @@ class SuperLUSolver:
         return self._lu.solve(np.asarray(b, float))
 
 
+def preconditioned_cg(matvec, precondition, b, rtol=1e-12, max_iter=25):
+    """x (n,) with A x = b by conjugate gradients, A given by ``matvec`` (n,) -> (n,), the
+    preconditioner by ``precondition`` (n,) -> (n,) (M^-1 r: a factorised matrix near A).
+    Stops at |b - A x| <= rtol |b|. Returns None when it does not get there in ``max_iter``
+    iterations or meets a direction of non-positive curvature (A not positive definite, or
+    the preconditioner too far from it): the caller factorises A instead."""
+    nb = np.linalg.norm(b)
+    if nb == 0:
+        return np.zeros_like(b)
+    x = precondition(b)
+    r = b - matvec(x)
+    z = precondition(r)
+    p, rz = z.copy(), float(r @ z)
+    for _ in range(max_iter):
+        if np.linalg.norm(r) <= rtol * nb:
+            return x
+        Ap = matvec(p)
+        pAp = float(p @ Ap)
+        if not pAp > 0 or not rz > 0:
+            return None
+        a = rz / pAp
+        x += a * p
+        r -= a * Ap
+        z = precondition(r)
+        rz, rz_old = float(r @ z), rz
+        p = z + (rz / rz_old) * p
+    return x if np.linalg.norm(r) <= rtol * nb else None
+
+
 def available():
     """Names of the solvers that can run here, best first."""
     names = []

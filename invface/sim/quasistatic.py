@@ -30,7 +30,9 @@ backtracking Armijo line search on E follows (it refuses inverting steps: E is i
 there). When Newton cannot reach the target from its start, the solve steps the inputs
 along the path from the start's (load stepping, ``Simulator.solve``).
 The exact Hessian at the solution is kept on the result; its factorisation
-(``SimResult.solver``) is made on first use by the tangent/adjoint solves (sim.adjoint).
+(``SimResult.solver``) is made on first use by the tangent solves (sim.adjoint). An adjoint
+solve needs none while the last Newton step's factorised exact Hessian is still here: it
+preconditions conjugate gradients on the matrix at the solution (``SimResult.solve_adjoint``).
 """
 from __future__ import annotations
 
@@ -74,6 +76,7 @@ class SimResult:
     tracks: Tracks = None
     _make_solver: object = field(default=None, repr=False)
     _solver: object = field(default=None, repr=False)
+    _newton_factor: tuple = field(default=None, repr=False)
 
     @property
     def solver(self):
@@ -89,6 +92,26 @@ class SimResult:
                                       f"stable equilibrium ({self.report()})") from e
             self._solver = s
         return self._solver
+
+    def solve_adjoint(self, b):
+        """x (n,) with H x = b for b (n,) on the free DOFs, H the exact Newton matrix at X.
+
+        While the simulator still holds the factorisation of the last Newton step's exact
+        Hessian (a step away from X: ``_newton_factor``), by conjugate gradients with that
+        factorisation as the preconditioner: 2-5 back-substitutions and products with H, no
+        factorisation (bench/RESULTS.md, issue 30). Otherwise, or when that does not converge
+        or meets non-positive curvature, with this result's own factorisation (``solver``,
+        which raises SimulationError where H is not positive definite)."""
+        b = np.asarray(b, float)
+        if self._solver is None and self._newton_factor is not None:
+            sim, count = self._newton_factor
+            if sim._factorisations == count:
+                U = sim.pattern.matrix(self.newton_data)
+                d = U.diagonal()
+                x = linsolve.preconditioned_cg(lambda v: U @ v + U.T @ v - d * v, sim._solver.solve, b)
+                if x is not None:
+                    return x
+        return self.solver.solve(b)
 
     def report(self):
         """One-paragraph status line for logs and errors."""
@@ -164,6 +187,8 @@ class Simulator:
         self.pattern = Pattern(dof, tets, pairs)
         self._solver_name = solver
         self._solver = self.make_solver()                                # symbolic analysis once
+        self._factorisations = 0        # factorisations of _solver so far (see SimResult.solve_adjoint)
+        self._exact_factor = -1         # ... the count after the last one of an exact Hessian
         # force scale for the absolute convergence floor: shear x edge^2 per vertex
         self.force_scale = shear * self.edge_length ** 2
         # the rest state's energy and Newton matrix: a check, and the compiled kernels loaded and
@@ -266,6 +291,7 @@ class Simulator:
         (up to the Newton tolerance) as long as it is the same local minimum.
         """
         t_all = time.perf_counter()
+        first_factor = self._factorisations
         act = self.activation_vector(activations)
         jaw = _jaw_vector(jaw)
         secs = {"assembly": 0.0, "factor": 0.0, "solve": 0.0, "line_search": 0.0}
@@ -318,6 +344,8 @@ class Simulator:
                         residuals=residuals, energy=float(E), inverted=int((vols <= 0).sum()),
                         min_J=float(vols.min()), seconds=secs, newton_data=data, load_steps=steps,
                         tracks=tracks, _make_solver=self.make_solver)
+        if converged and first_factor < self._exact_factor == self._factorisations:
+            res._newton_factor = (self, self._factorisations)     # this solve's last step's
         secs["other"] = time.perf_counter() - t_all - sum(secs.values())
         if not converged and raise_on_failure:
             raise SimulationError(res.report())
@@ -376,7 +404,7 @@ class Simulator:
             return None
         t = time.perf_counter()
         try:
-            self._solver.factor(H)
+            self._factor(H)
         except linsolve.NotSPD:
             return None
         finally:
@@ -452,7 +480,7 @@ class Simulator:
         def direction(values):
             t = time.perf_counter()
             try:
-                solver.factor(values)
+                self._factor(values)
             except linsolve.NotSPD:
                 secs["factor"] += time.perf_counter() - t
                 return None
@@ -484,9 +512,16 @@ class Simulator:
             dx = direction(values)
             if dx is not None:
                 memory[0] = rung
+                if rung == 0:
+                    self._exact_factor = self._factorisations
                 return dx
         memory[0] = len(ladder)
         return -g / (np.abs(base["projected"][diag]).max() + 1e-30)
+
+    def _factor(self, values):
+        """Factorise Newton matrix data (nnz,) into ``_solver`` (raises linsolve.NotSPD)."""
+        self._factorisations += 1
+        self._solver.factor(values)
 
     def _contact_projection(self, X, jm):
         """Newton matrix data (nnz,) to add to the exact matrix to project each acting
