@@ -583,6 +583,19 @@ def test_preconditioned_cg_solves_with_a_nearby_factorisation_and_refuses_indefi
     assert linsolve.preconditioned_cg(lambda v: A @ v, lambda r: r, b, max_iter=2) is None
 
 
+@pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL PARDISO not installed")
+def test_pardiso_is_found_from_the_mkl_wheel_without_pypardisos_search():
+    """pypardiso globs the whole prefix for MKL's library, once on import and once per
+    PyPardisoSolver (1.2 s per process here, every CLI call and Dask worker); the library is
+    found from the mkl wheel's file list instead, and pypardiso is never imported."""
+    import subprocess
+    import sys
+    code = ("import sys; from invface.sim import linsolve; linsolve._pardiso_function(); "
+            "print(linsolve.available()[0], 'pypardiso' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["pardiso", "False"]
+
+
 @pytest.mark.parametrize("name", linsolve.available())
 def test_solvers_solve_and_refuse_a_matrix_that_is_not_positive_definite(name):
     """Newton's fallbacks hang on NotSPD: each solver solves an SPD matrix (several right-hand
