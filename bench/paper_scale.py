@@ -92,6 +92,7 @@ def main():
                 t = time.perf_counter()
                 ge = activation_gradient(sim, r, gX)
                 stage(f"    ... its solve + contraction; rel. diff {np.abs(g - ge).max() / np.abs(ge).max():.1e}", t)
+        del r                                         # its factorisation is not held through the next solve
     print(f"peak memory {peak_gib():.2f} GiB")
 
 
