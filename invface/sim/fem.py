@@ -33,9 +33,11 @@ class Elements:
         G, _ = shape_gradients(X0, tets)
         self.X0, self.tets, self.volume, self.G = X0, tets, vol, np.ascontiguousarray(G, float)
 
-    def deformation_gradient(self, X):
-        """F (T,3,3) for positions X (N,3)."""
-        return np.einsum("tni,tnj->tij", X[self.tets], self.G)
+    def deformation_gradient(self, X, tets=None):
+        """F (T,3,3) for positions X (N,3); of the tets ``tets`` (indices) only when given."""
+        if tets is None:
+            return np.einsum("tni,tnj->tij", X[self.tets], self.G)
+        return np.einsum("tni,tnj->tij", X[self.tets[tets]], self.G[tets])
 
     def volumes(self, X):
         """Signed deformed volumes (T,) m^3."""
@@ -112,7 +114,7 @@ class FleshModel:
         """d(energy gradient)/d(activation) per fibre entry (Q,4,3): the active forces of Eq. 4
         (with a minus sign), V sigma_max f_a(lam) (d lam/dF) G_n, in the order of ``fmus``."""
         el = self.el
-        F = el.deformation_gradient(X)[self.ftets]
+        F = el.deformation_gradient(X, self.ftets)
         Fd = np.einsum("qij,qj->qi", F, self.fdirs)
         lam = np.maximum(np.linalg.norm(Fd, axis=1), 1e-12)
         w = self.mat.active_width
