@@ -525,7 +525,11 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
         def solve(self, b):
             return np.linalg.solve(self.A, b)
 
-    fake = SimpleNamespace(_solver=Dense(), pattern=SimpleNamespace(diag_slot=np.arange(n) * (n + 1)),
+    import scipy.sparse as sps
+    fake = SimpleNamespace(_solver=Dense(), pattern=SimpleNamespace(
+                               diag_slot=np.arange(n) * (n + 1),
+                               matrix=lambda v: sps.csr_matrix(np.triu(v.reshape(n, n)))),
+                           CG_RTOL=Simulator.CG_RTOL, CG_ITER=Simulator.CG_ITER, force_scale=1e6,
                            collisions=object() if contacts else None,
                            SHIFTS=Simulator.SHIFTS, CONTACT_SHIFTS=Simulator.CONTACT_SHIFTS,
                            _contact_projection=lambda X, jm: C.ravel().copy(),
@@ -539,7 +543,7 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
         + [("contacts" if contacts else "exact", mu) for mu in shifts] + [("projected", 0.0)]
     g = np.ones(n)
     secs = {"factor": 0.0, "solve": 0.0, "assembly": 0.0}
-    memory = [0]
+    memory = [0, -1]
     dx = Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, memory)
     assert np.allclose(dx, -np.linalg.solve(P, g))
     assert len(tried) == len(ladder) and memory[0] == len(ladder) - 1
@@ -557,7 +561,19 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
     for _ in range(len(ladder)):
         Simulator._newton_step(fake, None, None, None, None, SPD.ravel().copy(), g, secs, memory)
     assert memory[0] == 0                                       # back at the exact Hessian
-    assert fake._exact_factor == fake._factorisations          # ... and its factorisation held
+    assert fake._exact_factor == fake._factorisations == memory[1]   # ... and its factorisation held
+    # with it held, the next steps are conjugate gradients on the new exact Hessian, no factorisation
+    tried.clear()
+    near = np.diag([4.1, 2.9, 2.05, 1.1])
+    dx = Simulator._newton_step(fake, None, None, None, None, near.ravel().copy(), g, secs, memory)
+    assert not tried and np.allclose(dx, -np.linalg.solve(near, g), rtol=1e-5)
+    # the forcing term: the relative residual (|g| / (force scale sqrt n)) while below CG_RTOL
+    fake.force_scale = 1e-6
+    dx = Simulator._newton_step(fake, None, None, None, None, near.ravel().copy(), g, secs, memory)
+    assert not tried and np.linalg.norm(near @ dx + g) <= Simulator.CG_RTOL * np.linalg.norm(g)
+    # ... unless that Hessian is not positive definite: then the ladder, from the exact Hessian
+    Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, memory)
+    assert len(tried) >= 2 and np.allclose(tried[0], H)
 
 
 def test_preconditioned_cg_solves_with_a_nearby_factorisation_and_refuses_indefinite_matrices():

@@ -13,7 +13,7 @@ and track forces, i.e. it is a stationary point of the total energy
 a C2 function of the state X and the inputs (a, j, t) alone (the contacts of sim.collisions
 are fixed at set-up; Psi's volume barrier makes E infinite for an inverted tet).
 
-Each Newton step factorises the exact Hessian first (DESIGN.md: exact-first took 5
+Each Newton step solves with the exact Hessian first (DESIGN.md: exact-first took 5
 iterations where always-projected took 23). When the factorisation fails or the step is not
 a descent direction, it climbs a ladder of altered matrices (``Simulator._ladder``): with
 contacts, the exact Hessian with the acting contacts' 12x12 Hessians projected to PSD (every
@@ -27,8 +27,11 @@ that worked: a failed factorisation costs as much as one that succeeds, and in t
 solves at real-photo controls 215 of 383 factorisations failed when every step started from
 the exact Hessian (94 of 266 with the memory; bench/RESULTS.md, issue 30). A
 backtracking Armijo line search on E follows (it refuses inverting steps: E is infinite
-there). When Newton cannot reach the target from its start, the solve steps the inputs
-along the path from the start's (load stepping, ``Simulator.solve``).
+there). Once a step has factorised the exact Hessian, the next steps first try conjugate
+gradients on their own exact Hessian preconditioned with that factorisation (inexact Newton
+steps; ``_newton_step``), and factorise only when those do not converge. When Newton
+cannot reach the target from its start, the solve steps the inputs along the path from the
+start's (load stepping, ``Simulator.solve``).
 The exact Hessian at the solution is kept on the result; its factorisation
 (``SimResult.solver``) is made on first use by the tangent solves (sim.adjoint). An adjoint
 solve needs none while the last Newton step's factorised exact Hessian is still here: it
@@ -77,6 +80,7 @@ class SimResult:
     _make_solver: object = field(default=None, repr=False)
     _solver: object = field(default=None, repr=False)
     _newton_factor: tuple = field(default=None, repr=False)
+    ADJOINT_CG_ITER = 50        # a back-substitution each: 0.4 s at paper scale, a factorisation 30 s
 
     @property
     def solver(self):
@@ -96,19 +100,22 @@ class SimResult:
     def solve_adjoint(self, b):
         """x (n,) with H x = b for b (n,) on the free DOFs, H the exact Newton matrix at X.
 
-        While the simulator still holds the factorisation of the last Newton step's exact
-        Hessian (a step away from X: ``_newton_factor``), by conjugate gradients with that
-        factorisation as the preconditioner: 2-5 back-substitutions and products with H, no
-        factorisation (bench/RESULTS.md, issue 30). Otherwise, or when that does not converge
-        or meets non-positive curvature, with this result's own factorisation (``solver``,
-        which raises SimulationError where H is not positive definite)."""
+        While the simulator still holds this solve's last factorisation of an exact Hessian
+        (``_newton_factor``; a step away from X, or a few when the last steps were inexact
+        Newton steps on it), by conjugate gradients with that factorisation as the
+        preconditioner: 2-5 back-substitutions and products with H after an exact last step,
+        9-34 after inexact ones (default head; paper scale), no factorisation (bench/RESULTS.md,
+        issue 30). Otherwise, or when that does not converge in ADJOINT_CG_ITER iterations or
+        meets non-positive curvature, with this result's own factorisation (``solver``, which
+        raises SimulationError where H is not positive definite)."""
         b = np.asarray(b, float)
         if self._solver is None and self._newton_factor is not None:
             sim, count = self._newton_factor
             if sim._factorisations == count:
                 U = sim.pattern.matrix(self.newton_data)
                 d = U.diagonal()
-                x = linsolve.preconditioned_cg(lambda v: U @ v + U.T @ v - d * v, sim._solver.solve, b)
+                x = linsolve.preconditioned_cg(lambda v: U @ v + U.T @ v - d * v, sim._solver.solve, b,
+                                               max_iter=self.ADJOINT_CG_ITER)
                 if x is not None:
                     return x
         return self.solver.solve(b)
@@ -433,7 +440,7 @@ class Simulator:
         iterations before (a state the line search cannot leave; load stepping takes over)."""
         jm = self.model.jaw_matrix(jaw)
         residuals, ref, data = [], None, None
-        converged, it, E, memory = False, 0, np.inf, [0]
+        converged, it, E, memory = False, 0, np.inf, [0, -1]
         while True:
             t = time.perf_counter()
             E, g, data = self._total(X, act, jm, tracks, 2)
@@ -470,12 +477,33 @@ class Simulator:
             shifts = [("contacts", 0.0)] + [("contacts", mu) for mu in self.CONTACT_SHIFTS]
         return [("exact", 0.0)] + shifts + [("projected", 0.0)]
 
+    CG_RTOL, CG_ITER = 1e-2, 8   # Newton steps by conjugate gradients on a held factorisation: see _newton_step
+
     def _newton_step(self, X, act, jm, tracks, data, g, secs, memory):
-        """Newton direction from the first matrix of ``_ladder`` that factors and gives a
-        descent direction, starting one rung below the one that worked last step (kept in the
-        one-element list ``memory``); a shifted matrix is M + mu diag|H| with H the exact
+        """Newton direction for the exact Hessian data (nnz,) and gradient g (n,).
+
+        First, while the solver holds this Newton run's factorisation of an earlier step's
+        exact Hessian (``memory[1]``, the factorisation count then): conjugate gradients on the
+        exact Hessian preconditioned with it, to |H dx + g| <= CG_RTOL |g| in at most CG_ITER
+        iterations, a back-substitution each (an inexact Newton step: a factorisation costs 20
+        back-substitutions on the default head, 100 at paper scale; with the forcing term 1e-2
+        the default head's cold smile and jaw take the same 14 and 12 iterations as with exact
+        steps, and 5 and 6 of them need no factorisation; bench/RESULTS.md). Else, or when
+        they do not converge or meet non-positive curvature: the first matrix of ``_ladder``
+        that factors and gives a descent direction, starting one rung below the one that
+        worked last step (``memory[0]``); a shifted matrix is M + mu diag|H| with H the exact
         Hessian. When none works (a singular projected matrix), a scaled gradient step."""
         solver, diag = self._solver, self.pattern.diag_slot
+        if memory[1] == self._factorisations:
+            t = time.perf_counter()
+            U = self.pattern.matrix(data)
+            d = U.diagonal()
+            eta = min(self.CG_RTOL, float(np.linalg.norm(g)) / (self.force_scale * np.sqrt(len(g))))
+            dx = linsolve.preconditioned_cg(lambda v: U @ v + U.T @ v - d * v, solver.solve, -g,
+                                            rtol=eta, max_iter=self.CG_ITER)
+            secs["solve"] += time.perf_counter() - t
+            if dx is not None and dx @ g < 0:
+                return dx
 
         def direction(values):
             t = time.perf_counter()
@@ -513,7 +541,7 @@ class Simulator:
             if dx is not None:
                 memory[0] = rung
                 if rung == 0:
-                    self._exact_factor = self._factorisations
+                    self._exact_factor = memory[1] = self._factorisations
                 return dx
         memory[0] = len(ladder)
         return -g / (np.abs(base["projected"][diag]).max() + 1e-30)
