@@ -85,6 +85,9 @@ def test_pattern_with_constrained_vertices_and_extra_pairs_matches_a_dense_assem
     keep = (3 * np.flatnonzero(free)[:, None] + np.arange(3)).reshape(-1)
     assert np.allclose(got, A[np.ix_(keep, keep)], atol=1e-12)
     assert np.array_equal(pat.diag_slot, pat.slots(np.arange(pat.n), np.arange(pat.n)))
+    v = rng.normal(size=pat.n)                  # the symmetric product the conjugate gradients use
+    data = pat.assemble(Ke, [(both, np.concatenate([B, B.transpose(0, 2, 1)]))])
+    assert np.allclose(pat.matvec(data)(v), A[np.ix_(keep, keep)] @ v, atol=1e-10)
 
 
 def test_rest_state_has_zero_force_and_patch_test():
@@ -525,10 +528,9 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
         def solve(self, b):
             return np.linalg.solve(self.A, b)
 
-    import scipy.sparse as sps
     fake = SimpleNamespace(_solver=Dense(), pattern=SimpleNamespace(
                                diag_slot=np.arange(n) * (n + 1),
-                               matrix=lambda v: sps.csr_matrix(np.triu(v.reshape(n, n)))),
+                               matvec=lambda v: (lambda x: v.reshape(n, n) @ x)),
                            CG_RTOL=Simulator.CG_RTOL, CG_ITER=Simulator.CG_ITER, force_scale=1e6,
                            collisions=object() if contacts else None,
                            SHIFTS=Simulator.SHIFTS, CONTACT_SHIFTS=Simulator.CONTACT_SHIFTS,

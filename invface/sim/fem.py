@@ -267,6 +267,12 @@ class Pattern:
             return U
         return (U + U.T - sp.diags(U.diagonal())).tocsr()
 
+    def matvec(self, data):
+        """v (n,) -> A v for the symmetric matrix whose upper triangle is data (nnz,)."""
+        U = self.matrix(data)
+        d = U.diagonal()
+        return lambda v: U @ v + U.T @ v - d * v
+
     def scatter(self, grad_nodes):
         """Free-DOF vector (n,) from per-tet node vectors (T,4,3) of the pattern's tets."""
         dofs = self.elem_dofs.reshape(-1)

@@ -112,9 +112,7 @@ class SimResult:
         if self._solver is None and self._newton_factor is not None:
             sim, count = self._newton_factor
             if sim._factorisations == count:
-                U = sim.pattern.matrix(self.newton_data)
-                d = U.diagonal()
-                x = linsolve.preconditioned_cg(lambda v: U @ v + U.T @ v - d * v, sim._solver.solve, b,
+                x = linsolve.preconditioned_cg(sim.pattern.matvec(self.newton_data), sim._solver.solve, b,
                                                max_iter=self.ADJOINT_CG_ITER)
                 if x is not None:
                     return x
@@ -496,10 +494,8 @@ class Simulator:
         solver, diag = self._solver, self.pattern.diag_slot
         if memory[1] == self._factorisations:
             t = time.perf_counter()
-            U = self.pattern.matrix(data)
-            d = U.diagonal()
             eta = min(self.CG_RTOL, float(np.linalg.norm(g)) / (self.force_scale * np.sqrt(len(g))))
-            dx = linsolve.preconditioned_cg(lambda v: U @ v + U.T @ v - d * v, solver.solve, -g,
+            dx = linsolve.preconditioned_cg(self.pattern.matvec(data), solver.solve, -g,
                                             rtol=eta, max_iter=self.CG_ITER)
             secs["solve"] += time.perf_counter() - t
             if dx is not None and dx @ g < 0:
