@@ -350,7 +350,7 @@ class Simulator:
                         min_J=float(vols.min()), seconds=secs, newton_data=data, load_steps=steps,
                         tracks=tracks, _make_solver=self.make_solver)
         if converged and first_factor < self._exact_factor == self._factorisations:
-            res._newton_factor = (self, self._factorisations)     # this solve's last step's
+            res._newton_factor = (self, self._factorisations)     # this solve's last exact factorisation
         secs["other"] = time.perf_counter() - t_all - sum(secs.values())
         if not converged and raise_on_failure:
             raise SimulationError(res.report())
@@ -482,11 +482,12 @@ class Simulator:
 
         First, while the solver holds this Newton run's factorisation of an earlier step's
         exact Hessian (``memory[1]``, the factorisation count then): conjugate gradients on the
-        exact Hessian preconditioned with it, to |H dx + g| <= CG_RTOL |g| in at most CG_ITER
-        iterations, a back-substitution each (an inexact Newton step: a factorisation costs 20
-        back-substitutions on the default head, 100 at paper scale; with the forcing term 1e-2
-        the default head's cold smile and jaw take the same 14 and 12 iterations as with exact
-        steps, and 5 and 6 of them need no factorisation; bench/RESULTS.md). Else, or when
+        exact Hessian preconditioned with it, to |H dx + g| <= eta |g| with the forcing term
+        eta = min(CG_RTOL, the relative residual), in at most CG_ITER iterations, a
+        back-substitution each (an inexact Newton step: a factorisation costs 20
+        back-substitutions on the default head, 100 at paper scale; the default head's cold
+        smile and jaw take the same 14 and 12 iterations as with exact steps, with 29
+        factorisations instead of 43; bench/RESULTS.md, issue 30). Else, or when
         they do not converge or meet non-positive curvature: the first matrix of ``_ladder``
         that factors and gives a descent direction, starting one rung below the one that
         worked last step (``memory[0]``); a shifted matrix is M + mu diag|H| with H the exact
