@@ -13,9 +13,9 @@ pattern, contacts, symbolic analysis), a cold solve of a smile (zygomaticus majo
 anguli oris at 0.8) and of a jaw opening (0.2 rad), each with its Newton iterations and
 seconds per iteration by phase and, when it converged, the adjoint gradient of a loss on its
 state with respect to the muscle activations (``sim.adjoint.activation_gradient``:
-conjugate gradients preconditioned with the last Newton step's factorisation), then, for
-comparison, the same gradient by the factorisation at the solution. Load stepping is off: a solve that does not
-converge in ``--max-iter`` is reported as it is.
+conjugate gradients preconditioned with the solve's last factorisation of an exact Hessian),
+then, for comparison, the same gradient by the factorisation at the solution. Load stepping
+is off: a solve that does not converge in ``--max-iter`` is reported as it is.
 """
 from __future__ import annotations
 

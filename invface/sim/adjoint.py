@@ -11,8 +11,9 @@ with p = (b, j). dr/dp collects
   * the collision planes on the jaw, which move rigidly with it.
 Tangent mode solves all K+6 right-hand sides with one factorisation (the Jacobian Dogleg
 needs); adjoint mode solves H mu = dL/dX^U once and contracts mu with dr/dp term by term,
-so a gradient costs one adjoint solve whatever K is: a few back-substitutions with the last
-Newton step's factorisation (``SimResult.solve_adjoint``), no factorisation of its own.
+so a gradient costs one adjoint solve whatever K is: a few back-substitutions with the
+solve's last factorisation of an exact Hessian (``SimResult.solve_adjoint``), no
+factorisation of its own.
 
 Collisions: the contact energy (sim.collisions) is a C2 function of the flesh positions and
 the jaw transform, and its full Hessian is in the Newton matrix H, so with the jaw

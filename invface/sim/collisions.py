@@ -3,8 +3,8 @@ and flesh against bone (lips and cheeks against the teeth/jaw proxy).
 
 A contact is a free boundary vertex x and a triangle (a, b, c) on the other side, paired once
 at set-up: every facing triangle of the other lip or lid, or of the cranium or jaw mesh,
-whose centroid lies within ``radius`` (1.5 tet edges, at least MIN_CONTACT_RADIUS) of the vertex
-at rest. Its energy is
+whose centroid lies within ``radius`` (1.5 tet edges, at least MIN_CONTACT_RADIUS) of the
+vertex at rest. Its energy is
 
     E = w(r) e(gap),   gap = n . (x - a) - gap_rest,   r^2 = |x - centroid(a,b,c)|^2 - (n . (x - a))^2
 

@@ -34,7 +34,7 @@ cannot reach the target from its start, the solve steps the inputs along the pat
 start's (load stepping, ``Simulator.solve``).
 The exact Hessian at the solution is kept on the result; its factorisation
 (``SimResult.solver``) is made on first use by the tangent solves (sim.adjoint). An adjoint
-solve needs none while the last Newton step's factorised exact Hessian is still here: it
+solve needs none while the solve's last factorisation of an exact Hessian is still held: it
 preconditions conjugate gradients on the matrix at the solution (``SimResult.solve_adjoint``).
 """
 from __future__ import annotations
