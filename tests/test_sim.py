@@ -531,7 +531,8 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
     fake = SimpleNamespace(_solver=Dense(), pattern=SimpleNamespace(
                                diag_slot=np.arange(n) * (n + 1),
                                matvec=lambda v: (lambda x: v.reshape(n, n) @ x)),
-                           CG_RTOL=Simulator.CG_RTOL, CG_ITER=Simulator.CG_ITER, force_scale=1e6,
+                           CG_RTOL=Simulator.CG_RTOL, CG_ITER=Simulator.CG_ITER, CG_GATE=Simulator.CG_GATE,
+                           force_scale=1e6,
                            collisions=object() if contacts else None,
                            SHIFTS=Simulator.SHIFTS, CONTACT_SHIFTS=Simulator.CONTACT_SHIFTS,
                            _contact_projection=lambda X, jm: C.ravel().copy(),
@@ -545,7 +546,7 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
         + [("contacts" if contacts else "exact", mu) for mu in shifts] + [("projected", 0.0)]
     g = np.ones(n)
     secs = {"factor": 0.0, "solve": 0.0, "assembly": 0.0}
-    memory = [0, -1]
+    memory = [0, -1, None]
     dx = Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, memory)
     assert np.allclose(dx, -np.linalg.solve(P, g))
     assert len(tried) == len(ladder) and memory[0] == len(ladder) - 1
@@ -564,16 +565,23 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
         Simulator._newton_step(fake, None, None, None, None, SPD.ravel().copy(), g, secs, memory)
     assert memory[0] == 0                                       # back at the exact Hessian
     assert fake._exact_factor == fake._factorisations == memory[1]   # ... and its factorisation held
-    # with it held, the next steps are conjugate gradients on the new exact Hessian, no factorisation
+    # with it held, the next steps are conjugate gradients on the new exact Hessian, no
+    # factorisation, while that is within CG_GATE of the held one (0.6 % here)
     tried.clear()
-    near = np.diag([4.1, 2.9, 2.05, 1.1])
+    near = np.diag([4.02, 2.98, 2.01, 1.01])
     dx = Simulator._newton_step(fake, None, None, None, None, near.ravel().copy(), g, secs, memory)
     assert not tried and np.allclose(dx, -np.linalg.solve(near, g), rtol=1e-5)
     # the forcing term: the relative residual (|g| / (force scale sqrt n)) while below CG_RTOL
     fake.force_scale = 1e-6
     dx = Simulator._newton_step(fake, None, None, None, None, near.ravel().copy(), g, secs, memory)
     assert not tried and np.linalg.norm(near @ dx + g) <= Simulator.CG_RTOL * np.linalg.norm(g)
-    # ... unless that Hessian is not positive definite: then the ladder, from the exact Hessian
+    # a Hessian further from the held one (3 %, as when contacts switch): a factorisation
+    far = np.diag([4.1, 2.9, 2.05, 1.1])
+    Simulator._newton_step(fake, None, None, None, None, far.ravel().copy(), g, secs, memory)
+    assert len(tried) == 1 and np.allclose(tried[0], far) and memory[1] == fake._factorisations
+    # ... and one that is not positive definite, even with no gate: the ladder, from the exact Hessian
+    tried.clear()
+    fake.CG_GATE = np.inf
     Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, memory)
     assert len(tried) >= 2 and np.allclose(tried[0], H)
 

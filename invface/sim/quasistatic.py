@@ -80,6 +80,7 @@ class SimResult:
     _make_solver: object = field(default=None, repr=False)
     _solver: object = field(default=None, repr=False)
     _newton_factor: tuple = field(default=None, repr=False)
+    ADJOINT_CG_RTOL = 1e-10     # |b - H x| <= this |b|: x within ~1e-12 of the factorised solve
     ADJOINT_CG_ITER = 50        # a back-substitution each: 0.4 s at paper scale, a factorisation 30 s
 
     @property
@@ -113,7 +114,7 @@ class SimResult:
             sim, count = self._newton_factor
             if sim._factorisations == count:
                 x = linsolve.preconditioned_cg(sim.pattern.matvec(self.newton_data), sim._solver.solve, b,
-                                               max_iter=self.ADJOINT_CG_ITER)
+                                               rtol=self.ADJOINT_CG_RTOL, max_iter=self.ADJOINT_CG_ITER)
                 if x is not None:
                     return x
         return self.solver.solve(b)
@@ -438,7 +439,7 @@ class Simulator:
         iterations before (a state the line search cannot leave; load stepping takes over)."""
         jm = self.model.jaw_matrix(jaw)
         residuals, ref, data = [], None, None
-        converged, it, E, memory = False, 0, np.inf, [0, -1]
+        converged, it, E, memory = False, 0, np.inf, [0, -1, None]
         while True:
             t = time.perf_counter()
             E, g, data = self._total(X, act, jm, tracks, 2)
@@ -475,25 +476,29 @@ class Simulator:
             shifts = [("contacts", 0.0)] + [("contacts", mu) for mu in self.CONTACT_SHIFTS]
         return [("exact", 0.0)] + shifts + [("projected", 0.0)]
 
+    CG_GATE = 1e-2              # see _newton_step
     CG_RTOL, CG_ITER = 1e-2, 8   # Newton steps by conjugate gradients on a held factorisation: see _newton_step
 
     def _newton_step(self, X, act, jm, tracks, data, g, secs, memory):
         """Newton direction for the exact Hessian data (nnz,) and gradient g (n,).
 
         First, while the solver holds this Newton run's factorisation of an earlier step's
-        exact Hessian (``memory[1]``, the factorisation count then): conjugate gradients on the
-        exact Hessian preconditioned with it, to |H dx + g| <= eta |g| with the forcing term
-        eta = min(CG_RTOL, the relative residual), in at most CG_ITER iterations, a
-        back-substitution each (an inexact Newton step: a factorisation costs 20
-        back-substitutions on the default head, 100 at paper scale; the default head's cold
-        smile and jaw take the same 14 and 12 iterations as with exact steps, with 29
-        factorisations instead of 43; bench/RESULTS.md, issue 30). Else, or when
+        exact Hessian (``memory[1]``, the factorisation count then; ``memory[2]``, its data)
+        and this Hessian is within CG_GATE of it (|H - H_held| <= CG_GATE |H_held| over the
+        upper triangle's entries): conjugate gradients on the exact Hessian preconditioned
+        with it, to |H dx + g| <= eta |g| with the forcing term eta = min(CG_RTOL, the
+        relative residual), in at most CG_ITER iterations, a back-substitution and a product
+        with H each (an inexact Newton step: a factorisation costs about 13 such iterations on
+        the default head, 100 at paper scale). Beyond the gate contacts have switched and the
+        tries mostly fail: in the default head's cold smile and jaw, 2 of 9 tries beyond 1 %
+        converged, 8 of 9 within (bench/RESULTS.md, issue 30). Else, or when
         they do not converge or meet non-positive curvature: the first matrix of ``_ladder``
         that factors and gives a descent direction, starting one rung below the one that
         worked last step (``memory[0]``); a shifted matrix is M + mu diag|H| with H the exact
         Hessian. When none works (a singular projected matrix), a scaled gradient step."""
         solver, diag = self._solver, self.pattern.diag_slot
-        if memory[1] == self._factorisations:
+        if memory[1] == self._factorisations and (
+                np.linalg.norm(data - memory[2]) <= self.CG_GATE * np.linalg.norm(memory[2])):
             t = time.perf_counter()
             eta = min(self.CG_RTOL, float(np.linalg.norm(g)) / (self.force_scale * np.sqrt(len(g))))
             dx = linsolve.preconditioned_cg(self.pattern.matvec(data), solver.solve, -g,
@@ -539,6 +544,7 @@ class Simulator:
                 memory[0] = rung
                 if rung == 0:
                     self._exact_factor = memory[1] = self._factorisations
+                    memory[2] = data
                 return dx
         memory[0] = len(ladder)
         return -g / (np.abs(base["projected"][diag]).max() + 1e-30)
