@@ -39,6 +39,11 @@ def test_pyramid_is_opencv_pyrdown_and_its_adjoint_is_exact():
         np.testing.assert_allclose(G(a), ref, atol=1e-6)
         b = rng.random(len(ref))
         assert G(a) @ b == pytest.approx(float((a * G.adjoint(b)).sum()), rel=1e-10)
+        # the image Jacobian's rows: float32, written into a row of its matrix, weight applied
+        G2, row = Pyramid(h, w, weight=4.0), np.full((2, len(ref)), np.nan, np.float32)
+        G2(a, out=row[1])
+        np.testing.assert_allclose(row[1], 2.0 * ref, atol=1e-5)
+        assert np.isnan(row[0]).all()
 
 
 def _shading_scene(m):

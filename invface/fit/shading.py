@@ -104,16 +104,25 @@ class Pyramid:
         """The number of samples of one channel over all levels."""
         return sum(h * w for h, w in self.shapes)
 
-    def __call__(self, image):
+    def __call__(self, image, out=None):
+        """G image (len(self) * C,): float64, or in ``out``'s dtype written into ``out`` (the
+        image Jacobian's float32 rows, without the float64 copies)."""
         import cv2
-        cur = np.asarray(image, np.float64)
+        cur = np.asarray(image, np.float64 if out is None else out.dtype)
         c = cur.shape[2]
-        out = [cur.ravel()]
+        parts = [cur]
         for _ in self.mats:
             cur = cv2.pyrDown(cur, borderType=cv2.BORDER_REFLECT_101).reshape(-1, (cur.shape[1] + 1) // 2, c)
-            out.append(cur.ravel())
-        out = np.concatenate(out)
-        return out if self.scale == 1.0 else out * self.scale
+            parts.append(cur)
+        if out is None:
+            out = np.concatenate([a.ravel() for a in parts])
+        else:
+            ends = np.cumsum([0] + [a.size for a in parts])
+            for a, i, j in zip(parts, ends[:-1], ends[1:]):
+                out[i:j] = a.ravel()
+        if self.scale != 1.0:
+            out *= self.scale
+        return out
 
     def adjoint(self, vec, channels=3):
         """G^T vec: (H, W, channels)."""
@@ -322,7 +331,7 @@ class ShadingObjective:
                 dr.set_grad(x, mi.Float(Jall[k].astype(np.float32).ravel()))
                 dr.enqueue(dr.ADMode.Forward, x)
                 dr.traverse(dr.ADMode.Forward, flags=dr.ADFlag.ClearInterior)
-                C[k] = self.G(np.array(dr.grad(img), np.float32)[..., :3] * self.mask)
+                self.G(np.array(dr.grad(img), np.float32)[..., :3] * self.mask, out=C[k])
                 dr.clear_grad(img)
         return C
 
