@@ -491,7 +491,7 @@ class Simulator:
         with H each (an inexact Newton step: a factorisation costs about 13 such iterations on
         the default head, 100 at paper scale). Beyond the gate contacts have switched and the
         tries mostly fail: in the default head's cold smile and jaw, 2 of 9 tries beyond 1 %
-        converged, 8 of 9 within; at paper scale the smile made the same 32 factorisations
+        converged, 7 of 8 within; at paper scale the smile made the same 32 factorisations
         with and without the gate (bench/RESULTS.md, issue 30). Else, or when
         they do not converge or meet non-positive curvature: the first matrix of ``_ladder``
         that factors and gives a descent direction, starting one rung below the one that
