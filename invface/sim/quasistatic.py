@@ -104,9 +104,9 @@ class SimResult:
         While the simulator still holds this solve's last factorisation of an exact Hessian
         (``_newton_factor``; a step away from X, or a few when the last steps were inexact
         Newton steps on it), by conjugate gradients with that factorisation as the
-        preconditioner: 2-5 back-substitutions and products with H after an exact last step,
-        9-34 after inexact ones (default head; paper scale), no factorisation (bench/RESULTS.md,
-        issue 30). Otherwise, or when that does not converge in ADJOINT_CG_ITER iterations or
+        preconditioner, to |H x - b| <= ADJOINT_CG_RTOL |b|: 7-9 back-substitutions and
+        products with H on the default head, 8-34 at paper scale, no factorisation
+        (bench/RESULTS.md, issue 30). Otherwise, or when that does not converge in ADJOINT_CG_ITER iterations or
         meets non-positive curvature, with this result's own factorisation (``solver``, which
         raises SimulationError where H is not positive definite)."""
         b = np.asarray(b, float)
