@@ -532,6 +532,7 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
                                diag_slot=np.arange(n) * (n + 1),
                                matvec=lambda v: (lambda x: v.reshape(n, n) @ x)),
                            CG_RTOL=Simulator.CG_RTOL, CG_ITER=Simulator.CG_ITER, CG_GATE=Simulator.CG_GATE,
+                           EXACT_BELOW=Simulator.EXACT_BELOW,
                            force_scale=1e6,
                            collisions=object() if contacts else None,
                            SHIFTS=Simulator.SHIFTS, CONTACT_SHIFTS=Simulator.CONTACT_SHIFTS,
@@ -575,6 +576,7 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
     fake.force_scale = 1e-6
     dx = Simulator._newton_step(fake, None, None, None, None, near.ravel().copy(), g, secs, memory)
     assert not tried and np.linalg.norm(near @ dx + g) <= Simulator.CG_RTOL * np.linalg.norm(g)
+    fake.force_scale = 1e6
     # a Hessian further from the held one (3 %, as when contacts switch): a factorisation
     far = np.diag([4.1, 2.9, 2.05, 1.1])
     Simulator._newton_step(fake, None, None, None, None, far.ravel().copy(), g, secs, memory)
@@ -584,6 +586,12 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
     fake.CG_GATE = np.inf
     Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, memory)
     assert len(tried) >= 2 and np.allclose(tried[0], H)
+    # far from equilibrium (a relative residual above EXACT_BELOW) the exact Hessian is not
+    # tried where there are contacts: the ladder starts at the contact-projected matrix
+    tried.clear()
+    fake.force_scale, memory[:] = 1e-6, [0, -1, None]
+    Simulator._newton_step(fake, None, None, None, None, SPD.ravel().copy(), g, secs, memory)
+    assert np.allclose(tried[0], SPD + C if contacts else SPD) and memory[0] == int(contacts)
 
 
 def test_preconditioned_cg_solves_with_a_nearby_factorisation_and_refuses_indefinite_matrices():
