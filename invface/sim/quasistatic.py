@@ -106,9 +106,10 @@ class SimResult:
         Newton steps on it), by conjugate gradients with that factorisation as the
         preconditioner, to |H x - b| <= ADJOINT_CG_RTOL |b|: 7-9 back-substitutions and
         products with H on the default head, 8-34 at paper scale, no factorisation
-        (bench/RESULTS.md, issue 30). Otherwise, or when that does not converge in ADJOINT_CG_ITER iterations or
-        meets non-positive curvature, with this result's own factorisation (``solver``, which
-        raises SimulationError where H is not positive definite)."""
+        (bench/RESULTS.md, issue 30). Otherwise, or when that does not converge in
+        ADJOINT_CG_ITER iterations or meets non-positive curvature, with this result's own
+        factorisation (``solver``, which raises SimulationError where H is not positive
+        definite)."""
         b = np.asarray(b, float)
         if self._solver is None and self._newton_factor is not None:
             sim, count = self._newton_factor
