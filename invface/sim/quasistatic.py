@@ -440,7 +440,7 @@ class Simulator:
         iterations before (a state the line search cannot leave; load stepping takes over)."""
         jm = self.model.jaw_matrix(jaw)
         residuals, ref, data = [], None, None
-        converged, it, E, memory = False, 0, np.inf, [0, -1, None]
+        converged, it, E, memory = False, 0, np.inf, [0, None]
         while True:
             t = time.perf_counter()
             E, g, data = self._total(X, act, jm, tracks, 2)
@@ -485,9 +485,9 @@ class Simulator:
         """Newton direction for the exact Hessian data (nnz,) and gradient g (n,).
 
         First, while the solver holds this Newton run's factorisation of an earlier step's
-        exact Hessian (``memory[1]``, the factorisation count then; ``memory[2]``, its data)
-        and this Hessian is within CG_GATE of it (|H - H_held| <= CG_GATE |H_held| over the
-        upper triangle's entries): conjugate gradients on the exact Hessian preconditioned
+        exact Hessian (``memory[1]``, that Hessian's data; ``_exact_factor`` still the latest
+        factorisation) and this Hessian is within CG_GATE of it (|H - H_held| <= CG_GATE
+        |H_held| over the upper triangle's entries): conjugate gradients on the exact Hessian preconditioned
         with it, to |H dx + g| <= eta |g| with the forcing term eta = min(CG_RTOL, the
         relative residual), in at most CG_ITER iterations, a back-substitution and a product
         with H each (an inexact Newton step: a factorisation costs about 13 such iterations on
@@ -506,8 +506,8 @@ class Simulator:
         singular projected matrix), a scaled gradient step."""
         solver, diag = self._solver, self.pattern.diag_slot
         relative = float(np.linalg.norm(g)) / (self.force_scale * np.sqrt(len(g)))
-        if memory[1] == self._factorisations and (
-                np.linalg.norm(data - memory[2]) <= self.CG_GATE * np.linalg.norm(memory[2])):
+        if memory[1] is not None and self._exact_factor == self._factorisations and (
+                np.linalg.norm(data - memory[1]) <= self.CG_GATE * np.linalg.norm(memory[1])):
             t = time.perf_counter()
             dx = linsolve.preconditioned_cg(self.pattern.matvec(data), solver.solve, -g,
                                             rtol=min(self.CG_RTOL, relative), max_iter=self.CG_ITER)
@@ -554,8 +554,7 @@ class Simulator:
             if dx is not None:
                 memory[0] = rung
                 if rung == 0:
-                    self._exact_factor = memory[1] = self._factorisations
-                    memory[2] = data
+                    self._exact_factor, memory[1] = self._factorisations, data
                 return dx
         memory[0] = len(ladder)
         return -g / (np.abs(base["projected"][diag]).max() + 1e-30)
