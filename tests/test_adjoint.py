@@ -181,8 +181,10 @@ def test_a_state_that_is_not_a_stable_equilibrium_has_no_derivatives(driven):
 def test_a_gradient_right_after_a_solve_reuses_the_last_newton_factorisation(driven):
     """Issue 30: an adjoint solve at a fresh solution makes no factorisation. Conjugate
     gradients on the exact matrix there, preconditioned with the last Newton step's factorised
-    exact Hessian, agree with the matrix's own factorisation; once the simulator has factorised
-    something else, the result falls back to its own factorisation, with the same gradient."""
+    exact Hessian, agree with the matrix's own factorisation to the size of the forward solve's
+    tolerance (they stop at a relative residual of ADJOINT_CG_RTOL = 1e-6: 1e-7 here); once the
+    simulator has factorised something else, the result falls back to its own factorisation,
+    with the same gradient."""
     import dataclasses
     p, r = _state(driven)
     assert r.sim._newton_factor is not None and r.sim._solver is None
@@ -192,7 +194,7 @@ def test_a_gradient_right_after_a_solve_reuses_the_last_newton_factorisation(dri
     own = dataclasses.replace(r, sim=dataclasses.replace(r.sim, _newton_factor=None))
     g_own = Sensitivity(driven, own).gradient(gX)
     assert own.sim._solver is not None
-    assert np.abs(g_cg - g_own).max() <= 1e-9 * np.abs(g_own).max()
+    assert np.abs(g_cg - g_own).max() <= 1e-6 * np.abs(g_own).max()
     driven.solve(0.5 * p, warm=None)                            # the simulator factorises again
     g_later = Sensitivity(driven, r).gradient(gX)
     assert r.sim._solver is not None

@@ -597,7 +597,8 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
 
 def test_preconditioned_cg_solves_with_a_nearby_factorisation_and_refuses_indefinite_matrices():
     """The adjoint's conjugate gradients (sim.linsolve.preconditioned_cg): preconditioned by the
-    factorisation of a matrix 1 % away, they reach rtol 1e-12 in a few iterations; on an
+    factorisation of a matrix 1 % away, they reach rtol 1e-12 in a few iterations, with no
+    back-substitution after the residual that meets rtol (k iterations: k + 1 of them); on an
     indefinite matrix, or when the iterations run out, they return None."""
     import scipy.sparse as sps
     n = 200
@@ -614,6 +615,9 @@ def test_preconditioned_cg_solves_with_a_nearby_factorisation_and_refuses_indefi
     b = np.random.default_rng(0).standard_normal(n)
     x = linsolve.preconditioned_cg(lambda v: A @ v, precondition, b, rtol=1e-12)
     assert np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b) and len(calls) <= 8
+    k = len(calls) - 1                          # the iterations it took
+    assert linsolve.preconditioned_cg(lambda v: A @ v, precondition, b, rtol=1e-12, max_iter=k) is not None
+    assert linsolve.preconditioned_cg(lambda v: A @ v, precondition, b, rtol=1e-12, max_iter=k - 1) is None
     assert linsolve.preconditioned_cg(lambda v: -(A @ v), precondition, b) is None
     assert linsolve.preconditioned_cg(lambda v: A @ v, lambda r: r, b, max_iter=2) is None
 

@@ -70,11 +70,28 @@ def skin_derivatives(points, weights, M, deltas, dM):
     points (N,3) pre-skinning positions, deltas (K,N,3), dM (J,4,4) transform derivatives.
     Returns (K+J, N, 3): d/db_k = (1-w) d_k + w R d_k; d/dj = w (dR p + dt).
     """
-    R = M[:3, :3]
+    K, w = len(deltas), weights[:, None]
+    out = np.empty((K + len(dM),) + np.shape(points))
+    # (1-w) d + w R d = d + w (R - I) d, as one (K N, 3) x (3, 3) product
+    db = out[:K]
+    np.matmul(deltas.reshape(-1, 3), M[:3, :3].T - np.eye(3), out=db.reshape(-1, 3))
+    db *= w
+    db += deltas
+    J = len(dM)                               # dR p for all J at once: (N, 3) x (3, 3 J)
+    dj = (points @ dM[:, :3, :3].transpose(2, 0, 1).reshape(3, 3 * J)).reshape(-1, J, 3).transpose(1, 0, 2)
+    out[K:] = w * (dj + dM[:, None, :3, 3])
+    return out
+
+
+def skin_vjp(points, weights, M, deltas, dM, g):
+    """sum over points of g . skin_derivatives(points, weights, M, deltas, dM) (K+J,) for g
+    (N,3), without forming the derivatives: (1-w) d + w R d = d + w (R - I) d, so the
+    blendshape part is deltas against g + w g (R - I)."""
     w = weights[:, None]
-    db = (1 - w) * deltas + w * (deltas @ R.T)
-    dj = w * (np.einsum("jab,nb->jna", dM[:, :3, :3], points) + dM[:, None, :3, 3])
-    return np.concatenate([db, dj])
+    gb = g + w * (g @ (M[:3, :3] - np.eye(3)))
+    wg = w * g
+    dj = np.einsum("jab,na,nb->j", dM[:, :3, :3], wg, points) + dM[:, :3, 3] @ wg.sum(0)
+    return np.concatenate([deltas.reshape(len(deltas), -1) @ gb.reshape(-1), dj])
 
 
 def blendshape_surface(neutral, deltas, b, jaw, pivot, frame, jaw_weights):

@@ -22,6 +22,8 @@ equilibrium as a function of p, whatever state the solve started from.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..model.rig import jaw_transform_derivatives
@@ -47,20 +49,30 @@ class Sensitivity:
         jaw_rows = self.vec.jaw
         tr = driven.tracks
         self.da = tr.activation_jacobian(result.tracks, jm, dM)               # (M, P)
-        self.dt = tr.target_derivatives(result.tracks, jm, dM)                # (P, n_tr, 3)
+        self._jaw_motion = jm, dM
         self.dXc = np.zeros((self.P, self.N, 3))                                # constrained X^C(j)
-        j = model.fixed_jaw
+        self.jaw_vertices = j = model.fixed_jaw
         self.dXc[jaw_rows, j] = np.einsum("pab,nb->pna", dM[:, :3, :3], model.rest_positions[j]) + dM[:, None, :3, 3]
-        self.active = sim.flesh.active_forces(X)                               # (Q,4,3)
+        self.pull = sim.flesh.fibre_pull(X)                                    # (Q,3)
         col = sim.collisions
         self.dcontact = col.jaw_derivative(X, jm, dM) if col is not None else np.zeros((6, self.N, 3))
         # exact element stiffness of the tets on the jaw's constrained vertices: the only ones
         # whose stiffness meets dX^C/dj (H_UC dX^C/dj, and mu . H_UC dX^C/dj)
-        self.jaw_tets = np.flatnonzero(np.isin(sim.elements.tets, j).any(1))
+        self.jaw_tets = sim.jaw_tets
         self.Ke = sim.flesh.stiffness(X, result.sim.activations, self.jaw_tets)
         self.free = sim.free
 
     # -- pieces of dr/dp ------------------------------------------------------------------
+    @functools.cached_property
+    def dt(self):
+        """d track targets / dp (P, n_tr, 3) (tangent mode; the adjoint contracts without it)."""
+        return self.ds.tracks.target_derivatives(self.res.tracks, *self._jaw_motion)
+
+    def _jaw_rows_times(self, V):
+        """dX^C/dj . V (6,) for V (N,3): dX^C is zero but on the jaw rows and vertices."""
+        j = self.jaw_vertices
+        return np.einsum("pni,ni->p", self.dXc[self.vec.jaw][:, j], V[j])
+
     def _stiffness_times(self, V):
         """Element stiffness times displacements V (N,3) -> (N,3) (flesh only), summed over the
         tets on the jaw's constrained vertices: exact for a V that is zero elsewhere (dX^C/dj),
@@ -75,7 +87,7 @@ class Sensitivity:
         """Active force per muscle (M, N, 3): d gradient / d a_m."""
         fl = self.sim.flesh
         out = np.zeros((len(self.da), self.N, 3))
-        np.add.at(out, (fl.fmus[:, None], self.sim.elements.tets[fl.ftets]), self.active)
+        np.add.at(out, (fl.fmus[:, None], self.sim.elements.tets[fl.ftets]), fl.active_forces(self.pull))
         return out
 
     def rhs(self):
@@ -90,11 +102,10 @@ class Sensitivity:
 
     def _rhs_transpose(self, mu):
         """mu . dr/dp (P,) for mu (N,3) zero on constrained vertices, without forming dr/dp."""
-        g = _active_work(self.sim, self.active, mu) @ self.da
+        g = self.sim.flesh.active_work(self.pull, mu, len(self.da)) @ self.da
         tr = self.ds.tracks
-        g -= np.einsum("pvi,vi->p", self.dt, tr.stiffness[:, None] * mu[tr.vertices])
-        Hmu = self._stiffness_times(mu)
-        g[self.vec.jaw] += np.einsum("pni,ni->p", self.dXc[self.vec.jaw], Hmu)
+        g -= tr.target_vjp(self.res.tracks, *self._jaw_motion, tr.stiffness[:, None] * mu[tr.vertices])
+        g[self.vec.jaw] += self._jaw_rows_times(self._stiffness_times(mu))
         g[self.vec.jaw] += np.einsum("pni,ni->p", self.dcontact, mu)
         return g
 
@@ -111,7 +122,9 @@ class Sensitivity:
     def gradient(self, gX):
         """dLoss/dp (P,) for dLoss/dX = gX (N,3): one adjoint solve."""
         gX = np.asarray(gX, float)
-        return -self._rhs_transpose(_adjoint_state(self.sim, self.res.sim, gX)) + np.einsum("pni,ni->p", self.dXc, gX)
+        g = -self._rhs_transpose(_adjoint_state(self.sim, self.res.sim, gX))
+        g[self.vec.jaw] += self._jaw_rows_times(gX)
+        return g
 
     def surface_jacobian(self):
         """dx/dp (P, V, 3) of the render surface."""
@@ -156,7 +169,7 @@ def activation_gradient(sim, result, gX):
     activation (Eq. 4). The muscle-level gradient of paper 000 Sec. 7, without the
     blendshape-driven tracks (``Sensitivity`` has those); what the paper-scale bench times."""
     mu = _adjoint_state(sim, result, np.asarray(gX, float))
-    return -_active_work(sim, sim.flesh.active_forces(result.X), mu)
+    return -sim.flesh.active_work(sim.flesh.fibre_pull(result.X), mu, len(sim.muscle_names))
 
 
 def _adjoint_state(sim, result, gX):
@@ -166,10 +179,3 @@ def _adjoint_state(sim, result, gX):
     mu[sim.free] = result.solve_adjoint(gX[sim.free].reshape(-1)).reshape(-1, 3)
     return mu
 
-
-def _active_work(sim, active, mu):
-    """mu . dr/da_m per muscle (M,): the active forces per unit activation (Q,4,3)
-    (``FleshModel.active_forces``) against mu (N,3)."""
-    fl, tets = sim.flesh, sim.elements.tets
-    return np.bincount(fl.fmus, np.einsum("qni,qni->q", active, mu[tets[fl.ftets]]),
-                       minlength=len(sim.muscle_names))

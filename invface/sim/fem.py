@@ -108,19 +108,34 @@ class FleshModel:
         self.fmus = np.asarray(fibre_muscle, np.int64)[order]
         self.ftets = ftets[order]
         self.fptr = np.searchsorted(self.ftets, np.arange(len(elements.tets) + 1))
+        # per fibre entry: its tet's nodes (Q,4), d . G_n (Q,4) and rest volume (Q,), for active_forces
+        self._fibre_nodes = elements.tets[self.ftets]
+        self._fibre_G = np.einsum("qj,qnj->qn", self.fdirs, elements.G[self.ftets])
+        self._fibre_volume = elements.volume[self.ftets]
         self.prm = material.params()
 
-    def active_forces(self, X):
-        """d(energy gradient)/d(activation) per fibre entry (Q,4,3): the active forces of Eq. 4
-        (with a minus sign), V sigma_max f_a(lam) (d lam/dF) G_n, in the order of ``fmus``."""
-        el = self.el
-        F = el.deformation_gradient(X, self.ftets)
-        Fd = np.einsum("qij,qj->qi", F, self.fdirs)
+    def fibre_pull(self, X):
+        """V sigma_max f_a(lam) F d / lam per fibre entry (Q,3) at positions X (N,3), in the
+        order of ``fmus``: the active force on a tet's node n per unit activation is this times
+        d . G_n (``active_forces``, ``active_work``)."""
+        nodes, Gd = self._fibre_nodes, self._fibre_G
+        Fd = sum(X[nodes[:, n]] * Gd[:, n, None] for n in range(4))          # F d = sum_n x_n (G_n . d)
         lam = np.maximum(np.linalg.norm(Fd, axis=1), 1e-12)
         w = self.mat.active_width
-        s = el.volume[self.ftets] * self.mat.sigma_max * np.exp(-((lam - 1) / w) ** 2) / lam
-        # (d lam/dF) G_n = (F d)(d . G_n) / lam
-        return s[:, None, None] * np.einsum("qi,qn->qni", Fd, np.einsum("qj,qnj->qn", self.fdirs, el.G[self.ftets]))
+        return (self._fibre_volume * self.mat.sigma_max * np.exp(-((lam - 1) / w) ** 2) / lam)[:, None] * Fd
+
+    def active_forces(self, pull):
+        """d(energy gradient)/d(activation) per fibre entry (Q,4,3) from ``fibre_pull`` (Q,3):
+        the active forces of Eq. 4 (with a minus sign), V sigma_max f_a(lam) (d lam/dF) G_n,
+        (d lam/dF) G_n = (F d)(d . G_n) / lam."""
+        return pull[:, None, :] * self._fibre_G[:, :, None]
+
+    def active_work(self, pull, mu, n_muscles):
+        """mu . (the active forces of muscle m per unit activation) (n_muscles,) for
+        ``fibre_pull`` (Q,3) and a vertex field mu (N,3), without forming the forces (Q,4,3)."""
+        nodes, Gd = self._fibre_nodes, self._fibre_G
+        mu_d = sum(mu[nodes[:, n]] * Gd[:, n, None] for n in range(4))      # sum_n (d . G_n) mu_n
+        return np.bincount(self.fmus, np.einsum("qi,qi->q", pull, mu_d), minlength=n_muscles)
 
     def evaluate(self, X, act, order=2, project=False):
         """Energy (J), gradient (T,4,3) and element stiffness (T,12,12) at positions X (N,3).
@@ -270,8 +285,8 @@ class Pattern:
     def matvec(self, data):
         """v (n,) -> A v for the symmetric matrix whose upper triangle is data (nnz,)."""
         U = self.matrix(data)
-        d = U.diagonal()
-        return lambda v: U @ v + U.T @ v - d * v
+        Ut, d = U.T, U.diagonal()
+        return lambda v: U @ v + Ut @ v - d * v
 
     def scatter(self, grad_nodes):
         """Free-DOF vector (n,) from per-tet node vectors (T,4,3) of the pattern's tets."""

@@ -157,11 +157,11 @@ def preconditioned_cg(matvec, precondition, b, rtol=1e-12, max_iter=25):
         return np.zeros_like(b)
     x = precondition(b)
     r = b - matvec(x)
+    if np.linalg.norm(r) <= rtol * nb:
+        return x
     z = precondition(r)
     p, rz = z.copy(), float(r @ z)
     for _ in range(max_iter):
-        if np.linalg.norm(r) <= rtol * nb:
-            return x
         Ap = matvec(p)
         pAp = float(p @ Ap)
         if not pAp > 0 or not rz > 0:
@@ -169,10 +169,12 @@ def preconditioned_cg(matvec, precondition, b, rtol=1e-12, max_iter=25):
         a = rz / pAp
         x += a * p
         r -= a * Ap
+        if np.linalg.norm(r) <= rtol * nb:      # before the next back-substitution, not after it
+            return x
         z = precondition(r)
         rz, rz_old = float(r @ z), rz
         p = z + (rz / rz_old) * p
-    return x if np.linalg.norm(r) <= rtol * nb else None
+    return None
 
 
 def available():

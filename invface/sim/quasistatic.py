@@ -80,7 +80,8 @@ class SimResult:
     _make_solver: object = field(default=None, repr=False)
     _solver: object = field(default=None, repr=False)
     _newton_factor: tuple = field(default=None, repr=False)
-    ADJOINT_CG_RTOL = 1e-10     # |b - H x| <= this |b|: x within ~1e-12 of the factorised solve
+    ADJOINT_CG_RTOL = 1e-6      # |b - H x| <= this |b|: gradients within 6e-7 (relative) of the factorised
+    #                             solve's on the photo actors, the size of the forward rtol's own effect
     ADJOINT_CG_ITER = 50        # a back-substitution each: 0.4 s at paper scale, a factorisation 30 s
 
     @property
@@ -104,12 +105,12 @@ class SimResult:
         While the simulator still holds this solve's last factorisation of an exact Hessian
         (``_newton_factor``; a step away from X, or a few when the last steps were inexact
         Newton steps on it), by conjugate gradients with that factorisation as the
-        preconditioner, to |H x - b| <= ADJOINT_CG_RTOL |b|: 7-9 back-substitutions and
-        products with H on the default head, 8-34 at paper scale, no factorisation
-        (bench/RESULTS.md, issue 30). Otherwise, or when that does not converge in
-        ADJOINT_CG_ITER iterations or meets non-positive curvature, with this result's own
-        factorisation (``solver``, which raises SimulationError where H is not positive
-        definite)."""
+        preconditioner, to |H x - b| <= ADJOINT_CG_RTOL |b|: 4-7 back-substitutions and
+        products with H on the default head, 2-10 on the photo actors (8-34 at paper scale
+        with 1e-10), no factorisation (bench/RESULTS.md, issue 30). Otherwise, or when that
+        does not converge in ADJOINT_CG_ITER iterations or meets non-positive curvature, with
+        this result's own factorisation (``solver``, which raises SimulationError where H is
+        not positive definite)."""
         b = np.asarray(b, float)
         if self._solver is None and self._newton_factor is not None:
             sim, count = self._newton_factor
@@ -172,6 +173,8 @@ class Simulator:
         dof = np.full(N, -1, np.int64)
         dof[self.free] = np.arange(len(self.free))
         self.dof_of_vertex = dof
+        # the tets on the jaw's constrained vertices: where H_UC meets dX^C/dj (sim.adjoint)
+        self.jaw_tets = np.flatnonzero(np.isin(tets, model.fixed_jaw).any(1))
 
         self.muscle_names = [m.name for m in model.muscles]
         ft = [m.tets for m in model.muscles]

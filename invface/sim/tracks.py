@@ -104,7 +104,7 @@ class MuscleTracks:
         self.vertices = np.flatnonzero((k > 0) & free)
         self.stiffness = k[self.vertices]
         self.rest_targets = X0[self.vertices]
-        self.target_deltas = dX[:, self.vertices]                     # (K,n,3) = M^k
+        self.target_deltas = np.ascontiguousarray(dX[:, self.vertices])   # (K,n,3) = M^k
         self.target_weights = model.volume_jaw_weights[self.vertices]
         self.muscles = muscles
         pts = np.concatenate([m.centerline for m in muscles])
@@ -167,3 +167,9 @@ class MuscleTracks:
         from ..model.rig import skin_derivatives
 
         return skin_derivatives(state.pre_targets, self.target_weights, jaw_matrix, self.target_deltas, dM)
+
+    def target_vjp(self, state, jaw_matrix, dM, g):
+        """g . d targets / dp (K+J,) for g (n, 3), without forming the derivatives."""
+        from ..model.rig import skin_vjp
+
+        return skin_vjp(state.pre_targets, self.target_weights, jaw_matrix, self.target_deltas, dM, g)
