@@ -137,17 +137,21 @@ class FleshModel:
         mu_d = sum(mu[nodes[:, n]] * Gd[:, n, None] for n in range(4))      # sum_n (d . G_n) mu_n
         return np.bincount(self.fmus, np.einsum("qi,qi->q", pull, mu_d), minlength=n_muscles)
 
-    def evaluate(self, X, act, order=2, project=False):
+    def evaluate(self, X, act, order=2, project=False, Ke=None):
         """Energy (J), gradient (T,4,3) and element stiffness (T,12,12) at positions X (N,3).
 
         act (M,) muscle activations. order 0/1/2 stops after the energy/gradient. ``project``
-        applies the per-element definiteness fix to dP/dF.
+        applies the per-element definiteness fix to dP/dF. Ke: an array (T,12,12) float64 to
+        write the element stiffness into, instead of a new one (``Simulator`` keeps one).
         """
         el = self.el
         T = len(el.tets)
         psi = np.empty(T)
         grad = np.empty((T, 4, 3)) if order >= 1 else np.empty((1, 4, 3))
-        Ke = np.empty((T, 12, 12)) if order == 2 else np.empty((1, 12, 12))
+        if order < 2:
+            Ke = np.empty((1, 12, 12))
+        elif Ke is None:
+            Ke = np.empty((T, 12, 12))
         a = np.asarray(act, float)[self.fmus] if len(self.fmus) else np.zeros(0)
         _flesh_kernel(np.ascontiguousarray(X, float), el.tets, el.G, el.volume, self.fptr, self.fdirs,
                       a, self.prm, order, project, psi, grad, Ke)

@@ -173,6 +173,10 @@ class Simulator:
         dof = np.full(N, -1, np.int64)
         dof[self.free] = np.arange(len(self.free))
         self.dof_of_vertex = dof
+        # the element stiffness matrices (T,12,12) of every assembly, written into one array kept
+        # between assemblies: 1.3 GB at paper scale, where a new one cost 0.1-1.7 s of page
+        # faults per assembly against the kernel's 0.4 s (bench/RESULTS.md, issue 30)
+        self._element_work = None
         # the tets on the jaw's constrained vertices: where H_UC meets dX^C/dj (sim.adjoint)
         self.jaw_tets = np.flatnonzero(np.isin(tets, model.fixed_jaw).any(1))
 
@@ -248,7 +252,9 @@ class Simulator:
     def _total(self, X, act, jm, tracks, order, project=False):
         """Total energy, free-DOF gradient and Newton matrix data at X for activations act,
         jaw transform jm (4,4) (the bone contacts' planes) and tracks."""
-        E, g_nodes, Ke = self.flesh.evaluate(X, act, order, project)
+        if order == 2 and self._element_work is None:
+            self._element_work = np.empty((len(self.elements.tets), 12, 12))
+        E, g_nodes, Ke = self.flesh.evaluate(X, act, order, project, self._element_work if order == 2 else None)
         col = self.collisions
         if col is not None:
             E += col.energy(X, jm)
