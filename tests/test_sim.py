@@ -507,7 +507,9 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
     """Newton tries its matrices least altered first: the exact Hessian, then (with contacts)
     the contact-projected one, then the Levenberg-Marquardt shifts, then the per-element
     projected matrix; the next step starts one rung below the one that worked (no failed
-    factorisations of the rungs below that), and back at the exact Hessian once it works."""
+    factorisations of the rungs below that), and back at the exact Hessian once it works.
+    With contacts, the exact Hessian is not factorised where its submatrix around the acting
+    contacts is not positive definite (``_contact_region_indefinite``)."""
     from types import SimpleNamespace
     from invface.sim import linsolve
 
@@ -515,7 +517,8 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
     H = np.diag([4.0, 3.0, 2.0, -1.0])              # needs mu >= 0.25 of diag|H| to factor
     C = np.diag([0.0, 0.0, 0.0, 0.5])               # what projecting the contacts adds: still not SPD
     P = np.diag([4.0, 3.0, 2.0, 0.5])               # the "projected" matrix
-    tried = []
+    tried, region = [], []                            # region: the contact-region test's calls
+    sees = [False]                                    # whether it sees the last row (off: it never fires)
 
     class Dense:
         def factor(self, values):
@@ -537,6 +540,8 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
                            collisions=object() if contacts else None,
                            SHIFTS=Simulator.SHIFTS, CONTACT_SHIFTS=Simulator.CONTACT_SHIFTS,
                            _contact_projection=lambda X, jm: C.ravel().copy(),
+                           _contact_region_indefinite=lambda X, jm, v: region.append(
+                               sees[0] and v.reshape(n, n)[3, 3] <= 0) or region[-1],
                            _total=lambda *a, **k: (0.0, None, P.ravel().copy()),
                            _factorisations=0, _exact_factor=-1)
     fake._ladder = lambda: Simulator._ladder(fake)
@@ -593,6 +598,44 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
     fake.force_scale, memory[:] = 1e-6, [0, None]
     Simulator._newton_step(fake, None, None, None, None, SPD.ravel().copy(), g, secs, memory)
     assert np.allclose(tried[0], SPD + C if contacts else SPD) and memory[0] == int(contacts)
+    # the contact-region test was asked before the exact Hessian's factorisations, with contacts only
+    assert (len(region) > 0) == contacts
+    # near equilibrium, a Hessian whose contact region (here its last entry) is not positive
+    # definite: with contacts the test says so, and the exact Hessian is not factorised
+    tried.clear(), region.clear()
+    fake.force_scale, memory[:], sees[0] = 1e6, [0, None], True
+    Simulator._newton_step(fake, None, None, None, None, H.ravel().copy(), g, secs, memory)
+    assert np.allclose(tried[0], H + C if contacts else H)
+    assert region == ([True] if contacts else [])
+
+
+def test_the_contact_region_test_proves_a_newton_matrix_indefinite_near_the_contacts(sim, monkeypatch):
+    """Simulator._contact_region_indefinite: the Newton matrix on the acting contacts' flesh
+    vertices and CONTACT_RINGS rings around them. At an equilibrium with the lips pressed (60
+    vertices in contact) it is positive definite, like the whole matrix. With one contact
+    vertex's diagonal entry made negative it is not, nor is the whole matrix (the ladder then
+    skips its factorisation); the same entry at the free vertex farthest from the contacts is
+    outside the region: the test does not see it, the factorisation does. On this small head
+    the region is over REGION_FRACTION of the DOFs: by default not tested at all."""
+    from invface.sim import linsolve
+    r = sim.solve({n: 0.8 for n in sim.muscle_names if n.startswith("orbicularis")})
+    jm = sim.model.jaw_matrix(r.jaw)
+    verts = sim.collisions.acting_vertices(r.X, jm)
+    bad = r.newton_data.copy()
+    bad[sim.pattern.diag_slot[3 * sim.dof_of_vertex[verts[0]]]] *= -1
+    assert not sim._contact_region_indefinite(r.X, jm, bad)          # too large a region to test
+    monkeypatch.setattr(sim, "REGION_FRACTION", 1.0)
+    assert len(verts) > 10 and not sim._contact_region_indefinite(r.X, jm, r.newton_data)
+    solver = sim.make_solver()
+    solver.factor(r.newton_data)
+    dist = np.linalg.norm(r.X[:, None] - r.X[verts][None], axis=2).min(1)
+    free = sim.dof_of_vertex >= 0
+    for vertex, seen in ((verts[0], True), (int(np.argmax(np.where(free, dist, -1))), False)):
+        bad = r.newton_data.copy()
+        bad[sim.pattern.diag_slot[3 * sim.dof_of_vertex[vertex]]] *= -1
+        assert sim._contact_region_indefinite(r.X, jm, bad) == seen
+        with pytest.raises(linsolve.NotSPD):
+            solver.factor(bad)
 
 
 def test_preconditioned_cg_solves_with_a_nearby_factorisation_and_refuses_indefinite_matrices():

@@ -294,7 +294,7 @@ class Collisions:
 
         # flesh on flesh
         tri = faces[free_mask[faces].all(1)]
-        adj = _tet_adjacency(tets, N)
+        adj = tet_adjacency(tets, N)
         share = lambda i, f: np.any([np.asarray(adj[cand[i], tri[f, k]]).ravel() > 0 for k in range(3)], 0)
         i, f = _pairs(X0[cand], nrm[cand], X0, tri, radius, -0.5, share)
         vs, tris = [cand[i]], [tri[f]]
@@ -393,6 +393,14 @@ class Collisions:
         vertices (each contact's 12x12 Hessian projected to PSD when ``project``)."""
         return self._blocks(X, M, (lambda H: project_psd(H) if len(H) else H) if project else (lambda H: H))
 
+    def acting_vertices(self, X, M):
+        """The flesh vertices (sorted ids) of the contacts acting at positions X (N,3), jaw
+        transform M (4,4): each acting contact's vertex and its triangle's flesh vertices, and
+        the vertices pressed against an eyeball."""
+        m = self.acting(X, M)
+        ids = np.concatenate([self.v[m], self.tri[m].ravel(), self.eyes.terms(X, 0)[0]])
+        return np.unique(ids[ids < self.n_vertices])
+
     def projection_blocks(self, X, M):
         """The blocks, as ``blocks``, that projecting each acting contact's Hessian to PSD adds
         to its exact Hessian (each PSD): project_psd(H) - H."""
@@ -428,7 +436,7 @@ class Collisions:
         return out
 
 
-def _tet_adjacency(tets, n_vertices):
+def tet_adjacency(tets, n_vertices):
     """Sparse (N,N) matrix, nonzero where two vertices share a tet."""
     import scipy.sparse as sp
 

@@ -47,7 +47,7 @@ import numpy as np
 from ..errors import InvfaceError, MeshError, SimulationError
 from ..mesh.tets import face_use, mean_edge_length
 from . import linsolve
-from .collisions import MIN_CONTACT_RADIUS, Collisions
+from .collisions import MIN_CONTACT_RADIUS, Collisions, tet_adjacency
 from .fem import Elements, FleshModel, Pattern
 from .materials import Material
 from .tracks import Tracks
@@ -177,6 +177,7 @@ class Simulator:
         # between assemblies: 1.3 GB at paper scale, where a new one cost 0.1-1.7 s of page
         # faults per assembly against the kernel's 0.4 s (bench/RESULTS.md, issue 30)
         self._element_work = None
+        self._vertex_adjacency = None               # tet neighbours (N,N), for _contact_region_indefinite
         # the tets on the jaw's constrained vertices: where H_UC meets dX^C/dj (sim.adjoint)
         self.jaw_tets = np.flatnonzero(np.isin(tets, model.fixed_jaw).any(1))
 
@@ -511,8 +512,10 @@ class Simulator:
         switch, the exact Hessian is often not positive definite, and PARDISO finds that out
         at 80 % of a factorisation's cost (the paper-scale smile: 663 s against 843-895 s, the
         same 22 iterations; the photo actors' cold solves 76 failed factorisations against
-        94). A shifted matrix is M + mu diag|H| with H the exact Hessian. When none works (a
-        singular projected matrix), a scaled gradient step."""
+        94). Nor, with contacts, where its submatrix around the acting contacts is not positive
+        definite (``_contact_region_indefinite``: a proof that its factorisation would fail). A
+        shifted matrix is M + mu diag|H| with H the exact Hessian. When none works (a singular
+        projected matrix), a scaled gradient step."""
         solver, diag = self._solver, self.pattern.diag_slot
         relative = float(np.linalg.norm(g)) / (self.force_scale * np.sqrt(len(g)))
         if memory[1] is not None and self._exact_factor == self._factorisations and (
@@ -559,6 +562,12 @@ class Simulator:
             if mu:
                 values = values.copy()
                 values[diag] += mu * np.abs(data[diag])
+            if kind == "exact" and self.collisions is not None:
+                t = time.perf_counter()
+                indefinite = self._contact_region_indefinite(X, jm, values)
+                secs["factor"] += time.perf_counter() - t
+                if indefinite:
+                    continue
             dx = direction(values)
             if dx is not None:
                 memory[0] = rung
@@ -567,6 +576,42 @@ class Simulator:
                 return dx
         memory[0] = len(ladder)
         return -g / (np.abs(base["projected"][diag]).max() + 1e-30)
+
+    CONTACT_RINGS = 4           # see _contact_region_indefinite
+    REGION_FRACTION = 0.1       # ... and the largest region, as a fraction of the DOFs, it tests
+
+    def _contact_region_indefinite(self, X, jm, values):
+        """True when the Newton matrix data (nnz,) restricted to the flesh vertices of the
+        contacts acting at X (N,3) (jaw transform jm (4,4)), grown by CONTACT_RINGS rings of
+        tet neighbours, is not positive definite. It is a principal submatrix, so then neither
+        is the whole matrix, and factorising that would fail: the ladder skips the exact
+        Hessian without paying for it. Where contacts switch, their unprojected Hessians are
+        what makes the exact Hessian indefinite, near them: at paper scale the test found all
+        3 failed factorisations of the smile's exact Hessian (20-25 s each) in 0.28 s a test,
+        the region 3.7 % of the DOFs. On the default head the region is 15-25 % of them and a
+        test costs 12-17 ms against a factorisation's 40: regions over REGION_FRACTION of the
+        DOFs are not tested (False) (bench/RESULTS.md, issue 30)."""
+        verts = self.collisions.acting_vertices(X, jm)
+        if len(verts) == 0:
+            return False
+        if self._vertex_adjacency is None:
+            self._vertex_adjacency = tet_adjacency(self.elements.tets, self.N)
+        region = np.zeros(self.N)
+        region[verts] = 1.0
+        for _ in range(self.CONTACT_RINGS):
+            region = self._vertex_adjacency @ region
+        dof = self.dof_of_vertex[region > 0]
+        dof = dof[dof >= 0]
+        if 3 * len(dof) > self.REGION_FRACTION * self.pattern.n:
+            return False
+        idx = (3 * dof[:, None] + np.arange(3)).ravel()          # ascending: rows <= columns stay so
+        S = self.pattern.matrix(values)[idx][:, idx]               # the submatrix's upper triangle
+        pattern = linsolve.MatrixPattern(S)
+        try:
+            linsolve.make_solver(pattern, self._solver_name).factor(pattern.values(S))
+        except linsolve.NotSPD:
+            return True
+        return False
 
     def _factor(self, values):
         """Factorise Newton matrix data (nnz,) into ``_solver`` (raises linsolve.NotSPD)."""
