@@ -108,7 +108,7 @@ class FleshModel:
         self.fmus = np.asarray(fibre_muscle, np.int64)[order]
         self.ftets = ftets[order]
         self.fptr = np.searchsorted(self.ftets, np.arange(len(elements.tets) + 1))
-        # per fibre entry: its tet's nodes (Q,4), d . G_n (Q,4) and rest volume (Q,), for active_forces
+        # per fibre entry: its tet's nodes (Q,4), d . G_n (Q,4) and rest volume (Q,), for fibre_pull and active_work
         self._fibre_nodes = elements.tets[self.ftets]
         self._fibre_G = np.einsum("qj,qnj->qn", self.fdirs, elements.G[self.ftets])
         self._fibre_volume = elements.volume[self.ftets]

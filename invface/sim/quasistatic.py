@@ -106,11 +106,11 @@ class SimResult:
         (``_newton_factor``; a step away from X, or a few when the last steps were inexact
         Newton steps on it), by conjugate gradients with that factorisation as the
         preconditioner, to |H x - b| <= ADJOINT_CG_RTOL |b|: 4-7 back-substitutions and
-        products with H on the default head, 2-10 on the photo actors (8-34 at paper scale
-        with 1e-10), no factorisation (bench/RESULTS.md, issue 30). Otherwise, or when that
-        does not converge in ADJOINT_CG_ITER iterations or meets non-positive curvature, with
-        this result's own factorisation (``solver``, which raises SimulationError where H is
-        not positive definite)."""
+        products with H on the default head, 2-10 on the photo actors, 0.9-1.4 s at paper
+        scale against a factorisation's 30 s (bench/RESULTS.md, issue 30). Otherwise, or
+        when that does not converge in ADJOINT_CG_ITER iterations or meets non-positive
+        curvature, with this result's own factorisation (``solver``, which raises
+        SimulationError where H is not positive definite)."""
         b = np.asarray(b, float)
         if self._solver is None and self._newton_factor is not None:
             sim, count = self._newton_factor
