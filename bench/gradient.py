@@ -4,9 +4,9 @@
 
 Prints for the template: the Poisson precompute seconds (Eq. 10-11, all K blendshapes),
 the forward solve (cold from rest and warm), the adjoint gradient of a surface loss
-(Sensitivity set-up + the adjoint solve), after the cold solve and after a warm one, the full
-Jacobian (all K+6 controls by tangent solves) and the gradient/forward ratios; then the same gradient for a
-model with twice as many blendshapes, to show that its cost does not grow with K.
+(Sensitivity set-up + the adjoint solve) after the cold solve and after a warm one, the
+gradient/forward ratios, the full Jacobian (all K+6 controls by tangent solves); then the same
+gradient for a model with twice as many blendshapes, to show that its cost does not grow with K.
 
 ``--fd`` checks the adjoint instead (issue 25): the gradient of L(p) = sum(g * surface(p))
 (random g) against central differences of solves that each start from rest, on every control,
