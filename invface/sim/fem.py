@@ -33,11 +33,9 @@ class Elements:
         G, _ = shape_gradients(X0, tets)
         self.X0, self.tets, self.volume, self.G = X0, tets, vol, np.ascontiguousarray(G, float)
 
-    def deformation_gradient(self, X, tets=None):
-        """F (T,3,3) for positions X (N,3); of the tets ``tets`` (indices) only when given."""
-        if tets is None:
-            return np.einsum("tni,tnj->tij", X[self.tets], self.G)
-        return np.einsum("tni,tnj->tij", X[self.tets[tets]], self.G[tets])
+    def deformation_gradient(self, X):
+        """F (T,3,3) for positions X (N,3)."""
+        return np.einsum("tni,tnj->tij", X[self.tets], self.G)
 
     def volumes(self, X):
         """Signed deformed volumes (T,) m^3."""
