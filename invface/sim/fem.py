@@ -106,18 +106,23 @@ class FleshModel:
         self.fmus = np.asarray(fibre_muscle, np.int64)[order]
         self.ftets = ftets[order]
         self.fptr = np.searchsorted(self.ftets, np.arange(len(elements.tets) + 1))
-        # per fibre entry: its tet's nodes (Q,4), d . G_n (Q,4) and rest volume (Q,), for fibre_pull and active_work
+        # per fibre entry: its tet's nodes (Q,4), d . G_n (Q,4) and rest volume (Q,)
         self._fibre_nodes = elements.tets[self.ftets]
         self._fibre_G = np.einsum("qj,qnj->qn", self.fdirs, elements.G[self.ftets])
         self._fibre_volume = elements.volume[self.ftets]
         self.prm = material.params()
 
+    def _along_fibres(self, V):
+        """sum_n (d . G_n) V_n (Q,3) per fibre entry for a vertex field V (N,3) over its tet's
+        nodes n: F d for positions, the work per unit pull for an adjoint field."""
+        nodes, Gd = self._fibre_nodes, self._fibre_G
+        return sum(V[nodes[:, n]] * Gd[:, n, None] for n in range(4))
+
     def fibre_pull(self, X):
         """V sigma_max f_a(lam) F d / lam per fibre entry (Q,3) at positions X (N,3), in the
         order of ``fmus``: the active force on a tet's node n per unit activation is this times
         d . G_n (``active_forces``, ``active_work``)."""
-        nodes, Gd = self._fibre_nodes, self._fibre_G
-        Fd = sum(X[nodes[:, n]] * Gd[:, n, None] for n in range(4))          # F d = sum_n x_n (G_n . d)
+        Fd = self._along_fibres(X)
         lam = np.maximum(np.linalg.norm(Fd, axis=1), 1e-12)
         w = self.mat.active_width
         return (self._fibre_volume * self.mat.sigma_max * np.exp(-((lam - 1) / w) ** 2) / lam)[:, None] * Fd
@@ -131,16 +136,14 @@ class FleshModel:
     def active_work(self, pull, mu, n_muscles):
         """mu . (the active forces of muscle m per unit activation) (n_muscles,) for
         ``fibre_pull`` (Q,3) and a vertex field mu (N,3), without forming the forces (Q,4,3)."""
-        nodes, Gd = self._fibre_nodes, self._fibre_G
-        mu_d = sum(mu[nodes[:, n]] * Gd[:, n, None] for n in range(4))      # sum_n (d . G_n) mu_n
-        return np.bincount(self.fmus, np.einsum("qi,qi->q", pull, mu_d), minlength=n_muscles)
+        return np.bincount(self.fmus, np.einsum("qi,qi->q", pull, self._along_fibres(mu)), minlength=n_muscles)
 
     def evaluate(self, X, act, order=2, project=False, Ke=None):
         """Energy (J), gradient (T,4,3) and element stiffness (T,12,12) at positions X (N,3).
 
         act (M,) muscle activations. order 0/1/2 stops after the energy/gradient. ``project``
-        applies the per-element definiteness fix to dP/dF. Ke: an array (T,12,12) float64 to
-        write the element stiffness into, instead of a new one (``Simulator`` keeps one).
+        applies the per-element definiteness fix to dP/dF. Ke: an array (T,12,12) float64 that
+        order 2 writes the element stiffness into, instead of a new one (``Simulator`` keeps one).
         """
         el = self.el
         T = len(el.tets)

@@ -255,7 +255,7 @@ class Simulator:
         jaw transform jm (4,4) (the bone contacts' planes) and tracks."""
         if order == 2 and self._element_work is None:
             self._element_work = np.empty((len(self.elements.tets), 12, 12))
-        E, g_nodes, Ke = self.flesh.evaluate(X, act, order, project, self._element_work if order == 2 else None)
+        E, g_nodes, Ke = self.flesh.evaluate(X, act, order, project, self._element_work)      # Ke: order 2 only
         col = self.collisions
         if col is not None:
             E += col.energy(X, jm)
