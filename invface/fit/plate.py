@@ -50,10 +50,10 @@ COARSE_RADIUS = 4.0
 SIMULATION_RADIUS = 4.0
 # the simulation's coarse stage stops after a step that lowers its cost by less than 5 %: it
 # only takes the long steps. The coarse levels pin the head's depth loosely, and at 2 % it
-# went on to move the head 0.2-0.3 mm towards the camera on 5 of 12 fits of the
+# went on to move the head 0.2-0.3 mm towards the camera on 6 of 15 fits of the
 # smile_blendshape sample plate, which the whole pyramid's stage then did not undo (posed
-# error 0.27-0.30 mm against 0.12-0.17 mm without the stage; at 5 %: 0.11-0.14 mm in 6 of 6)
-# (bench/RESULTS.md, "The simulation's own coarse stage")
+# error 0.27-0.30 mm, against 0.12-0.17 mm in 10 fits without the stage; at 5 %: 0.11-0.14
+# mm in 8 of 8) (bench/RESULTS.md, "The simulation's own coarse stage")
 SIMULATION_COARSE_FTOL = 5e-2
 
 
