@@ -14,12 +14,10 @@ Stages (``PlateFit.history`` logs each):
    solution. The two models share their controls, so the cheap one does the long walk
    (stage 2 stops early, at a 2% decrease) and the simulation, whose evaluation costs a
    Newton solve and for accepted steps its tangents (~2 s on the default head, on top of
-   the ~1 s render), the last steps: first on the pyramid's lower levels at half
-   resolution (stopping at a 5 % decrease: the long steps), then on the whole pyramid. Its
-   last stage stops by the rig's final stage's rule (a step that lowers the cost by less
-   than 0.5 %): on a real photo the image term keeps a high floor (the photo is not a
-   render of the model), so at 1 % the simulation stopped after one step, still on the
-   rig's curve answer (bench/RESULTS.md, "The simulation's stop rule").
+   the ~1 s render), the last steps. Its stage stops by the rig's final stage's rule (a step
+   that lowers the cost by less than 0.5 %): on a real photo the image term keeps a high
+   floor (the photo is not a render of the model), so at 1 % the simulation stopped after
+   one step, still on the rig's curve answer (bench/RESULTS.md, "The simulation's stop rule").
 
 The calibration (gamma, albedo) comes from Eq. 14 on a neutral plate of the same actor and
 camera set-up.
@@ -48,13 +46,6 @@ from .shading import fit_shading
 # stage's first trust radius")
 COARSE_RADIUS = 4.0
 SIMULATION_RADIUS = 4.0
-# the simulation's coarse stage stops after a step that lowers its cost by less than 5 %: it
-# only takes the long steps. The coarse levels pin the head's depth loosely, and at 2 % it
-# went on to move the head 0.2-0.3 mm towards the camera on 6 of 15 fits of the
-# smile_blendshape sample plate, which the whole pyramid's stage then did not undo (posed
-# error 0.27-0.30 mm, against 0.12-0.17 mm in 10 fits without the stage; at 5 %: 0.11-0.14
-# mm in 8 of 8) (bench/RESULTS.md, "The simulation's own coarse stage")
-SIMULATION_COARSE_FTOL = 5e-2
 
 
 @dataclass
@@ -146,20 +137,17 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     history = [dict(h, stage="curves") for h in cf.history]
     seconds = {"curves": time.perf_counter() - t0}
     p, rot, tr, status = cf.p, cf.rotation, cf.translation, f"curves: {cf.status}"
-    # coarse to fine: each kind first fits the pyramid's lower levels (the render at half
-    # resolution, a quarter of the pixels to differentiate), then the whole pyramid. For the
-    # simulation the blendshape steps only have to bring the head near: at most 6, as a
-    # blendshape optimum is a poor start for it (the same weights mean other shapes; from
-    # there the open-mouth plate's simulation stage stalled at once); then the simulation's
-    # own coarse stage takes the long steps, whose image Jacobians cost a quarter of the
-    # whole pyramid's (``SIMULATION_COARSE_FTOL``)
+    # coarse to fine: the blendshape model first fits the pyramid's lower levels (the render
+    # at half resolution, a quarter of the pixels to differentiate), then the kind fits the
+    # whole pyramid. For the simulation the blendshape steps only have to bring the head
+    # near: at most 6, as a blendshape optimum is a poor start for it (the same weights
+    # mean other shapes; from there the open-mouth plate's simulation stage stalled at once)
     n = max_iter_shading
     final_ftol = 5e-3           # both kinds' last stage: a fair comparison, see the module doc
     stages = [("shading-coarse", "blendshape", 2e-2, 1, n, COARSE_RADIUS),
               ("shading", "blendshape", final_ftol, 0, n, 1.0)] \
         if kind == "blendshape" else \
         [("shading-coarse", "blendshape", 2e-2, 1, min(6, n), COARSE_RADIUS),
-         ("shading-simulation-coarse", "simulation", SIMULATION_COARSE_FTOL, 1, n, SIMULATION_RADIUS),
          ("shading-simulation", "simulation", final_ftol, 0, n, SIMULATION_RADIUS)]
     for stage, skind, ftol, level, iters, radius in stages if shading else []:
         t1 = time.perf_counter()

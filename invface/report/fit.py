@@ -72,8 +72,7 @@ def _convergence(path, history):
     """Cost per log entry, one colour per stage (and per pass of the curve stage: the
     tracking pass and Eq. 15 weigh the controls differently, so their costs differ)."""
     colours = {"curves (pose)": "#7fb3d5", "curves": "#2980b9", "curves (controls)": "#2980b9",
-               "shading-coarse": "#e59866", "shading": "#c0392b", "shading-simulation-coarse": "#bb8fce",
-               "shading-simulation": "#8e44ad",
+               "shading-coarse": "#e59866", "shading": "#c0392b", "shading-simulation": "#8e44ad",
                "dogleg": "#2c3e50"}
 
     def draw(ax):
