@@ -184,6 +184,13 @@ def locate(X, tets, points, k=32):
     return cand[rows, best], bary[rows, best]
 
 
+def tet_adjacency(tets, n_vertices):
+    """Sparse (N,N) matrix, nonzero where two vertices share a tet."""
+    rows = np.repeat(np.arange(len(tets)), 4)
+    inc = sp.csr_matrix((np.ones(rows.size), (tets.reshape(-1), rows)), shape=(n_vertices, len(tets)))
+    return (inc @ inc.T).tocsr()
+
+
 def tets_within_rings(tets, n_nodes, start, rings):
     """The tets within ``rings`` vertex-rings of each point's tet ``start`` (P,): sparse C (P, T)
     with C[p, t] != 0 for those tets, and the tet-node incidence M (T, N) (so C @ M marks

@@ -44,7 +44,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..mesh.tets import boundary_faces
+from ..mesh.tets import boundary_faces, tet_adjacency
 from ..mesh.triangles import face_normals, group_offsets, vertex_normals
 from .materials import project_psd
 
@@ -434,12 +434,3 @@ class Collisions:
             dq = (rest @ D[:3, :3].T + D[:3, 3]).reshape(-1, 9)
             np.add.at(out[i], v, np.einsum("cij,cj->ci", H[:, :3, 3:], dq))
         return out
-
-
-def tet_adjacency(tets, n_vertices):
-    """Sparse (N,N) matrix, nonzero where two vertices share a tet."""
-    import scipy.sparse as sp
-
-    rows = np.repeat(np.arange(len(tets)), 4)
-    inc = sp.csr_matrix((np.ones(rows.size), (tets.reshape(-1), rows)), shape=(n_vertices, len(tets)))
-    return (inc @ inc.T).tocsr()

@@ -45,9 +45,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InvfaceError, MeshError, SimulationError
-from ..mesh.tets import face_use, mean_edge_length
+from ..mesh.tets import face_use, mean_edge_length, tet_adjacency
 from . import linsolve
-from .collisions import MIN_CONTACT_RADIUS, Collisions, tet_adjacency
+from .collisions import MIN_CONTACT_RADIUS, Collisions
 from .fem import Elements, FleshModel, Pattern
 from .materials import Material
 from .tracks import Tracks
