@@ -294,7 +294,9 @@ class Collisions:
 
         # flesh on flesh
         tri = faces[free_mask[faces].all(1)]
-        adj = tet_adjacency(tets, N)
+        #: tet neighbours (N, N) sparse, nonzero where two vertices share a tet (also the
+        #: simulator's contact-region test)
+        self.adjacency = adj = tet_adjacency(tets, N)
         share = lambda i, f: np.any([np.asarray(adj[cand[i], tri[f, k]]).ravel() > 0 for k in range(3)], 0)
         i, f = _pairs(X0[cand], nrm[cand], X0, tri, radius, -0.5, share)
         vs, tris = [cand[i]], [tri[f]]

@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InvfaceError, MeshError, SimulationError
-from ..mesh.tets import face_use, mean_edge_length, tet_adjacency
+from ..mesh.tets import face_use, mean_edge_length
 from . import linsolve
 from .collisions import MIN_CONTACT_RADIUS, Collisions
 from .fem import Elements, FleshModel, Pattern
@@ -177,7 +177,6 @@ class Simulator:
         # between assemblies: 1.3 GB at paper scale, where a new one cost 0.1-1.7 s of page
         # faults per assembly against the kernel's 0.4 s (bench/RESULTS.md, issue 30)
         self._element_work = None
-        self._vertex_adjacency = None               # tet neighbours (N,N), for _contact_region_indefinite
         # the tets on the jaw's constrained vertices: where H_UC meets dX^C/dj (sim.adjoint)
         self.jaw_tets = np.flatnonzero(np.isin(tets, model.fixed_jaw).any(1))
 
@@ -594,12 +593,10 @@ class Simulator:
         verts = self.collisions.acting_vertices(X, jm)
         if len(verts) == 0:
             return False
-        if self._vertex_adjacency is None:
-            self._vertex_adjacency = tet_adjacency(self.elements.tets, self.N)
         region = np.zeros(self.N)
         region[verts] = 1.0
         for _ in range(self.CONTACT_RINGS):
-            region = self._vertex_adjacency @ region
+            region = self.collisions.adjacency @ region
         dof = self.dof_of_vertex[region > 0]
         dof = dof[dof >= 0]
         if 3 * len(dof) > self.REGION_FRACTION * self.pattern.n:
