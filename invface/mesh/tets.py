@@ -184,11 +184,16 @@ def locate(X, tets, points, k=32):
     return cand[rows, best], bary[rows, best]
 
 
+def tet_incidence(tets, n_nodes):
+    """Sparse CSR (T, N) tet-node incidence: M[t, n] = 1 where node n is a corner of tet t."""
+    return sp.csr_matrix((np.ones(tets.size), (np.repeat(np.arange(len(tets)), 4), tets.ravel())),
+                         shape=(len(tets), n_nodes))
+
+
 def tet_adjacency(tets, n_vertices):
     """Sparse (N,N) matrix, nonzero where two vertices share a tet."""
-    rows = np.repeat(np.arange(len(tets)), 4)
-    inc = sp.csr_matrix((np.ones(rows.size), (tets.reshape(-1), rows)), shape=(n_vertices, len(tets)))
-    return (inc @ inc.T).tocsr()
+    M = tet_incidence(tets, n_vertices)
+    return (M.T @ M).tocsr()
 
 
 def tets_within_rings(tets, n_nodes, start, rings):
@@ -196,7 +201,7 @@ def tets_within_rings(tets, n_nodes, start, rings):
     with C[p, t] != 0 for those tets, and the tet-node incidence M (T, N) (so C @ M marks
     their nodes). Both CSR, duplicates summed."""
     T, P = len(tets), len(start)
-    M = sp.csr_matrix((np.ones(tets.size), (np.repeat(np.arange(T), 4), tets.ravel())), shape=(T, n_nodes))
+    M = tet_incidence(tets, n_nodes)
     C = sp.csr_matrix((np.ones(P), (np.arange(P), start)), shape=(P, T))
     for _ in range(rings):
         C = ((C @ M) @ M.T).tocsr()
