@@ -19,7 +19,7 @@ import numpy as np
 import trimesh
 
 import invface
-from invface.mesh.meshfile import read_mesh
+from invface.io.meshes import read_mesh
 from invface.morph.build import build_model
 
 SCAN = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" / "scans" / "lee_perry_smith.obj"

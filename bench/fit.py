@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 import invface
-from invface.fit.pose import pose_points, unpose_points
+from invface.model.pose import pose_points, unpose_points
 from invface.fit.scan import fit_scan
 from invface.model import FitVector
 

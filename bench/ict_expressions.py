@@ -32,7 +32,7 @@ import numpy as np
 import invface
 from invface.fit.scan import fit_scan, write_scan_fit
 from invface.mesh.closest import closest_points
-from invface.mesh.meshfile import read_mesh
+from invface.io.meshes import read_mesh
 from invface.morph.build import build_model
 
 ICT = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit"

@@ -23,7 +23,7 @@ import numpy as np
 
 import invface
 from invface.errors import InvfaceError
-from invface.mesh.meshfile import read_mesh
+from invface.io.meshes import read_mesh
 from invface.morph.build import build_model
 
 SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"

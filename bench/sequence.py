@@ -30,7 +30,8 @@ from invface.fit.lambdas import TEMPORAL_LAMBDA
 from invface.fit.samples import clip_controls, write_sample_clip
 from invface.pipeline.clips import open_clip
 from invface.pipeline.distributed import fit_sequence_distributed
-from invface.pipeline.sequence import curve_rows, jitter, run_hash, sequence_records
+from invface.pipeline.outputs import curve_rows, jitter, sequence_records
+from invface.pipeline.runs import run_hash
 from invface.render.synthetic import skin_albedo, studio_light
 
 

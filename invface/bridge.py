@@ -46,7 +46,7 @@ class _SurfaceOp(dr.CustomOp):
 
 class _PosedSurfaceOp(dr.CustomOp):
     def eval(self, function, z, exact):
-        from .fit.pose import posed_surface
+        from .model.pose import posed_surface
         self.model, self.vector, self.ftype = function.model, function.vector, type(z)
         self.z = np.array(z, dtype=np.float64) if exact is None else np.asarray(exact, np.float64)
         self.x, xr = posed_surface(self.model, self.z, self.vector)
@@ -54,13 +54,13 @@ class _PosedSurfaceOp(dr.CustomOp):
         return self.ftype(np.ascontiguousarray(xr, np.float32).reshape(-1))
 
     def forward(self):
-        from .fit.pose import posed_jacobian
+        from .model.pose import posed_jacobian
         dz = np.array(self.grad_in("z"), dtype=np.float64)
         _, J = posed_jacobian(self.model, self.z, self.vector)              # (size, V, 3)
         self.set_grad_out(self.ftype(np.tensordot(dz, J, axes=(0, 0)).reshape(-1).astype(np.float32)))
 
     def backward(self):
-        from .fit.pose import posed_vjp
+        from .model.pose import posed_vjp
         g = np.array(self.grad_out(), dtype=np.float64).reshape(-1, 3)
         self.set_grad_in("z", self.ftype(posed_vjp(self.model, self.z, self.vector, g, x=self.x).astype(np.float32)))
 
@@ -85,8 +85,8 @@ class PosedSurfaceFunction:
     flat Float posed positions x_R = R(rotation) x(p) + translation (3V,) m.
 
     The pose is applied in float64 numpy inside the operation, so the positions are those
-    of ``fit.pose.posed_surface`` to float32 rounding; the reverse pass is one adjoint product
-    (``fit.pose.posed_vjp``: the surface model's ``surface_vjp`` once). exact: z as float64
+    of ``model.pose.posed_surface`` to float32 rounding; the reverse pass is one adjoint product
+    (``model.pose.posed_vjp``: the surface model's ``surface_vjp`` once). exact: z as float64
     numpy, for the surface model to be evaluated there rather than at z's float32 values (the
     optimiser's point, exactly); ``last`` keeps the float64 positions of the last call."""
 

@@ -100,7 +100,7 @@ def _load_model(path, resolution):
 def _read_activations(path):
     """{muscle: activation} and optional jaw (6,) from a JSON file {"activations": {...}, "jaw": [...]}
     (a plain {muscle: value} mapping is accepted too)."""
-    from .jsonfile import read_object
+    from .io.jsonfile import read_object
     data = read_object(path, what="activations file")
     acts = data.get("activations", {k: v for k, v in data.items() if k != "jaw"})
     if not isinstance(acts, dict):
@@ -139,7 +139,7 @@ def cmd_simulate(args):
                       progress=lambda i, r: print(f"  .. Newton {i}: relative residual {r:.2e}", flush=True))
     print("\n".join(result.describe()))
     if args.output:
-        from .mesh.meshfile import write_mesh
+        from .io.meshes import write_mesh
         write_mesh(args.output, result.surface, model.triangles)
         print(f"wrote {args.output}")
     if args.preview:
@@ -246,7 +246,8 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
     kind and the report paths; on a Dask cluster with ``workers`` or ``scheduler``. run: more
     keys for run.json (what the calibration was made from)."""
     from .pipeline import open_clip
-    from .pipeline.sequence import curve_rows, fit_sequence, jitter, sequence_records
+    from .pipeline.outputs import curve_rows, jitter, sequence_records
+    from .pipeline.sequence import fit_sequence
     clip = open_clip(clip)
     bars = _FitBars()
     skipped = []
@@ -305,7 +306,8 @@ def cmd_fit_plate(args):
     from .fit.calibrate import Calibration
     from .pipeline import find_curves, model_kinds, open_clip
     from .model.facemodel import FaceModel
-    from .pipeline.sequence import actor_identity, pick_neutral, read_run
+    from .pipeline.neutral import actor_identity, pick_neutral
+    from .pipeline.runs import read_run
     from .report.runs import earlier_fits
     if args.iterations < 0:
         raise InvfaceError(f"--iterations {args.iterations}: give 0 or more shape-from-shading iterations")
@@ -404,7 +406,8 @@ def cmd_demo(args):
         sheet = write_expression_sheet(model, out / "expressions_simulation.png", kind="simulation",
                                        progress=_progress)
         print(f"simulation contact sheet: {sheet}")
-    (out / "summary.json").write_text(json.dumps(model.summary(), indent=2))
+    from .io.jsonfile import write_object
+    write_object(out / "summary.json", model.summary(), indent=2)
     print(f"wrote {out / 'template_head.npz'}, {len(paths)} preview images; open {paths[-1]}")
     _demo_fit(model, out)
     return 0
@@ -414,7 +417,7 @@ def _demo_fit(model, out):
     """Sample plates with known controls; calibrate on the neutral one (Eq. 14), fit the
     simulation-made smile with both model kinds (Eq. 15-16), write the report."""
     from .fit.samples import write_sample_plates
-    from .jsonfile import read_object
+    from .io.jsonfile import read_object
     from .pipeline import as_plate
     folder = out / "plates"
     print("rendering sample plates (known controls, light and albedo)", flush=True)

@@ -8,7 +8,7 @@ from invface.errors import ImageError, InvfaceError
 from invface.fit.calibrate import Calibration
 from invface.fit.curves import PLATE_CURVES, curve_points, projection_jacobian
 from invface.fit.plate import fit_plate, read_truth, vertex_errors, write_plate_fit
-from invface.fit.pose import posed_jacobian, posed_parts, posed_surface
+from invface.model.pose import posed_jacobian, posed_parts, posed_surface
 from invface.model import FitVector
 from invface.fit.shading import Pyramid, ShadingObjective
 from invface.render.camera import Camera

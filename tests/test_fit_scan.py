@@ -163,7 +163,7 @@ def test_ict_expression_as_a_real_scan(ict_actor, kind):
     in nearest mode: the jaw opens and the moving part of the scan comes much closer."""
     from conftest import ICT
     from invface.mesh.closest import closest_points
-    from invface.mesh.meshfile import read_mesh
+    from invface.io.meshes import read_mesh
     m = ict_actor
     V0, F = read_mesh(ICT / "neutral.obj")
     data = np.load(ICT / "expressions.npz")

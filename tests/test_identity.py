@@ -5,7 +5,7 @@ import numpy as np
 
 from invface.fit.curves import curve_points, rms_px
 from invface.fit.identity import fit_identity
-from invface.fit.pose import pose_points
+from invface.model.pose import pose_points
 from invface.model.controls import FitVector
 from invface.morph.synthetic import random_identity
 from invface.render.camera import Camera

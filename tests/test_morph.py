@@ -150,7 +150,7 @@ def test_real_scan_ict_neutral(small_model, tmp_path):
     its jawOpen blendshape is split into the jaw's rotation and a remainder that the muscle
     simulation follows."""
     from conftest import ICT
-    from invface.mesh.meshfile import read_mesh
+    from invface.io.meshes import read_mesh
     from invface.mesh.tets import radius_ratio, signed_volumes
     from invface.mesh.triangles import boundary_loops, boundary_vertices, umbrella
     if not (ICT / "neutral.obj").exists():

@@ -65,7 +65,7 @@ def test_surface_models_come_from_a_registry(small_model):
 def test_layers_import_downwards_only():
     """The model layer and the dogleg do not import the simulation; nothing below the CLI
     imports it, and benches and tests use the library (DESIGN.md, import direction)."""
-    code = ("import sys, invface, invface.model, invface.fit.dogleg, invface.fit.pose; "
+    code = ("import sys, invface, invface.model, invface.fit.dogleg, invface.model.pose; "
             "print([m for m in sys.modules if m.startswith('invface.sim') or m.startswith('invface.cli')])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
@@ -94,7 +94,7 @@ def test_gradient_only_path_takes_one_adjoint_product(small_expressive_model):
     dogleg path's J^T r of the same render (curves, prior and a sequence's temporal term
     included)."""
     from invface.fit.curves import PLATE_CURVES, curve_points, projection_jacobian
-    from invface.fit.pose import posed_surface
+    from invface.model.pose import posed_surface
     from invface.fit.shading import ShadingObjective
     m = small_expressive_model
     cam, vec, z, g, a, plate = _sim_scene(m)

@@ -62,7 +62,8 @@ def test_frame_selection_and_clip_sources(clip, tmp_path):
 
 
 def test_flags_and_curves_of_flagged_frames_come_from_their_neighbours():
-    from invface.pipeline.sequence import curve_rows, flag_reason, jitter
+    from invface.pipeline.frames import flag_reason
+    from invface.pipeline.outputs import curve_rows, jitter
     assert flag_reason(2.0, 0.01, [1.0, 1.2, 0.9]) == ""
     assert "curve RMS 12.0 px" in flag_reason(12.0, 0.01, [1.0, 1.2, 0.9])
     assert flag_reason(3.5, 0.01, [1.0, 1.0]) == ""                 # 3.5x but only 2.5 px more
@@ -131,7 +132,7 @@ def test_video_fit_is_killed_and_resumed_and_writes_curves_and_overlay(clip, tmp
 def test_temporal_term_lowers_jitter_without_losing_the_curves(small_expressive_model, clip):
     from invface.fit.calibrate import Calibration
     from invface.pipeline import fit_sequence
-    from invface.pipeline.sequence import curve_rows, jitter
+    from invface.pipeline.outputs import curve_rows, jitter
     root, frames, _ = clip
     cal = Calibration.load(root / "calib.npz")
     res = {}
@@ -151,7 +152,9 @@ def test_two_process_local_cluster_matches_the_single_process_run(small_expressi
     from invface.fit.calibrate import Calibration
     from invface.pipeline.clips import open_clip
     from invface.pipeline.distributed import chunk_bounds, fit_sequence_distributed
-    from invface.pipeline.sequence import fit_frames, run_hash, sequence_records
+    from invface.pipeline.frames import fit_frames
+    from invface.pipeline.outputs import sequence_records
+    from invface.pipeline.runs import run_hash
     assert chunk_bounds(7, 3) == [(0, 2), (2, 5), (5, 7)] and chunk_bounds(2, 5) == [(0, 1), (1, 2)]
     import pickle
     root, frames, _ = clip

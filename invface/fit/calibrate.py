@@ -45,7 +45,6 @@ per-vertex albedo the misalignment is absorbed by the albedo, and the pose did n
 from __future__ import annotations
 
 import json
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -84,11 +83,9 @@ class Calibration:
         path = Path(path)
         meta = {"lam": self.lam, "plate": self.plate, "history": self.history,
                 "camera": None if self.camera is None else self.camera.to_dict()}
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(tmp, gamma=self.gamma, albedo=self.albedo, rotation=self.rotation,
-                            translation=self.translation, meta=np.array(json.dumps(meta)))
-        os.replace(tmp, path)
-        return path
+        from ..io.arrays import savez
+        return savez(path, dict(gamma=self.gamma, albedo=self.albedo, rotation=self.rotation,
+                                translation=self.translation, meta=np.array(json.dumps(meta))))
 
     @classmethod
     def load(cls, path, vertex_count=None):

@@ -25,12 +25,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InvfaceError
-from ..jsonfile import read_object
+from ..io.jsonfile import read_object
 from ..mesh.sections import resample_even as resample
 from ..model.controls import FitVector
 from .dogleg import dogleg
 from .lambdas import EQ15_ANCHOR_LAMBDA, EQ15_LAMBDA_1, EQ15_TRACK_LAMBDA
-from .pose import pose_points, posed_jacobian, posed_surface, prior_rows, regulariser, temporal_prior
+from ..model.pose import pose_points, posed_jacobian, posed_surface
+from .priors import prior_rows, regulariser, temporal_prior
 
 PLATE_CURVES = ("lip_outer_upper", "lip_outer_lower", "lip_inner_upper", "lip_inner_lower",
                 "eye_L_upper", "eye_L_lower", "eye_R_upper", "eye_R_lower")
@@ -131,12 +132,11 @@ def check_curves(curves, image_size, name="curves"):
 
 def write_curves(path, curves, image_size=None):
     """Write a plate curve file ({name: (n, 2) px})."""
-    import json
-    from pathlib import Path
+    from ..io.jsonfile import write_object
     data = {"curves": {k: np.round(np.asarray(v, float), 3).tolist() for k, v in curves.items()}}
     if image_size is not None:
         data["image_size"] = [int(s) for s in image_size]
-    Path(path).write_text(json.dumps(data))
+    write_object(path, data, indent=None)
 
 
 def closest_on_polyline(points, poly, normals=False):

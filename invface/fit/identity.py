@@ -43,7 +43,7 @@ from scipy.sparse.linalg import spsolve
 from ..errors import InvfaceError
 from ..model.rig import euler_xyz
 from .curves import CurveObjective, rms_px
-from .pose import pose_points
+from ..model.pose import pose_points
 
 IDENTITY_LENGTH = 0.007     # m: the smoothness scale of the identity field (a third of an eye's width;
                             # on the real clip 0.012 left 2.05 px on frames not fitted, 0.007 1.9 px)

@@ -34,7 +34,7 @@ from ..errors import ImageError, InvfaceError, SimulationError
 from ..model.controls import FitVector
 from .curves import CurveObjective, curve_points, fit_curves, projection_jacobian, rms_px
 from .lambdas import EQ15_LAMBDA_1, EQ16_TEMPORAL
-from .pose import posed_parts, posed_surface, unpose_points
+from ..model.pose import posed_parts, posed_surface, unpose_points
 from .results import NamedControls, write_fit_files
 from .shading import fit_shading
 
@@ -216,7 +216,7 @@ def read_truth(path, model):
     """Ground truth of a synthetic plate (``<plate>.truth.json``, written by
     ``fit.samples.write_sample_plates``): the posed surface (V, 3) made by the model kind
     it names, and the dict."""
-    from ..jsonfile import read_object
+    from ..io.jsonfile import read_object
     t = read_object(path, what="ground-truth file")
     vec = FitVector.of(model)
     try:

@@ -39,14 +39,13 @@ def write_sample_plates(model, folder, names=None, size=(720, 540), noise=0.005,
     NAME.truth.json (the controls, pose and model kind that made it) and NAME.curves.json
     (the model's plate curves projected from the truth, with ``curve_noise`` px of noise).
     Deterministic. Returns the plate paths."""
-    import json
     from pathlib import Path
 
+    from ..io.images import write_image
+    from ..io.jsonfile import write_object
     from ..model.controls import FitVector
-    from ..render.plates import write_image
-    from .pose import pose_points
+    from ..model.pose import pose_points
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     cam = sample_camera(*size)
     gamma, albedo = studio_light(), skin_albedo(model)
     vec = FitVector.of(model)
@@ -64,7 +63,7 @@ def write_sample_plates(model, folder, names=None, size=(720, 540), noise=0.005,
         truth = {"kind": kind, "weights": weights, "jaw": p[vec.jaw].tolist(), "rotation": list(rot),
                  "translation": list(tr), "light": "studio_light()", "albedo": "skin_albedo(model, seed=0)",
                  "noise": noise}
-        (folder / f"{name}.truth.json").write_text(json.dumps(truth, indent=1))
+        write_object(folder / f"{name}.truth.json", truth)
         xr = pose_points(x, rot, tr)
         rng = np.random.default_rng(100 + i)
         curves = {c: projection_jacobian(cam, curve_points(model, c, xr))[0] for c in PLATE_CURVES}
@@ -100,25 +99,30 @@ def write_sample_clip(model, folder, n=24, kind="blendshape", size=(320, 240), f
     folder/clip.mp4 (MPEG-4, lossy), its camera clip.json and the per-frame sidecars
     clip.frame_NNNNNN.truth.json / .curves.json beside it. Deterministic (but for the video
     encoder). Returns (frames folder, video path or None)."""
-    import json
+    import contextlib
     from pathlib import Path
 
-    import cv2
-
-    from ..model.controls import FitVector
-    from ..render.plates import linear_to_srgb, write_image
-    from .pose import pose_points
+    from ..io.video import VideoWriter
     folder = Path(folder)
-    frames = folder / "frames"
-    frames.mkdir(parents=True, exist_ok=True)
     cam = sample_camera(*size)
+    if video:
+        cam.save(folder / "clip.json")
+    with VideoWriter(folder / "clip.mp4", fps) if video else contextlib.nullcontext() as writer:
+        _write_clip_frames(model, kind, folder, writer, cam, n, fps, noise, curve_noise, progress)
+    return folder / "frames", (folder / "clip.mp4") if video else None
+
+
+def _write_clip_frames(model, kind, folder, writer, cam, n, fps, noise, curve_noise, progress):
+    """The frames of ``write_sample_clip``: each rendered and written with its sidecars into
+    folder/frames and, with a video ``writer``, appended to it with its sidecars in ``folder``."""
+    from ..io.images import linear_to_srgb, write_image
+    from ..io.jsonfile import write_object
+    from ..model.controls import FitVector
+    from ..model.pose import pose_points
+    frames = folder / "frames"
     gamma, albedo = studio_light(), skin_albedo(model)
     vec = FitVector.of(model)
     sm = model.surface_model(kind)
-    writer = None
-    if video:
-        cam.save(folder / "clip.json")
-        writer = cv2.VideoWriter(str(folder / "clip.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), fps, tuple(size))
     rng = np.random.default_rng(7)
     for i, (weights, jaw, rot, tr) in enumerate(clip_controls(model, n, fps)):
         if progress:
@@ -136,13 +140,10 @@ def write_sample_clip(model, folder, n=24, kind="blendshape", size=(320, 240), f
         name = f"frame_{i:03d}"
         write_image(frames / f"{name}.png", image)
         cam.save(frames / f"{name}.json")
-        (frames / f"{name}.truth.json").write_text(json.dumps(truth, indent=1))
+        write_object(frames / f"{name}.truth.json", truth)
         write_curves(frames / f"{name}.curves.json", curves, image_size=cam.size)
         if writer is not None:
-            (folder / f"clip.frame_{i:06d}.truth.json").write_text(json.dumps(truth, indent=1))
+            write_object(folder / f"clip.frame_{i:06d}.truth.json", truth)
             write_curves(folder / f"clip.frame_{i:06d}.curves.json", curves, image_size=cam.size)
             rgb = (np.clip(linear_to_srgb(image), 0, 1) * 255 + 0.5).astype(np.uint8)
-            writer.write(np.ascontiguousarray(rgb[..., ::-1]))
-    if writer is not None:
-        writer.release()
-    return frames, (folder / "clip.mp4") if video else None
+            writer.write(rgb)

@@ -38,7 +38,8 @@ from ..model.controls import FitVector
 from ..model.rig import JAW_LOWER, JAW_UPPER
 from .dogleg import dogleg
 from .lambdas import EQ13_LAMBDA
-from .pose import posed_jacobian, posed_surface, regulariser
+from ..model.pose import posed_jacobian, posed_surface
+from .priors import regulariser
 from .results import NamedControls, write_fit_files
 
 

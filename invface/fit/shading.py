@@ -58,7 +58,8 @@ from ..render.backplate import background_plate, head_silhouette
 from ..render.renderer import FaceRenderer
 from .curves import CurveObjective
 from .lambdas import EQ16_LAMBDA_1, EQ16_LAMBDA_2
-from .pose import posed_jacobian, posed_parts, posed_surface, prior_rows, regulariser, temporal_prior
+from ..model.pose import posed_jacobian, posed_parts, posed_surface
+from .priors import prior_rows, regulariser, temporal_prior
 
 LEVELS = 3
 #: Huber threshold of the image rows (linear light, per pyramid sample and channel): about 10x

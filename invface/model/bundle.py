@@ -7,16 +7,16 @@ metadata live in the JSON header (key ``header``).
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import BundleError, InvfaceError
+from ..io.arrays import savez
 from ..mesh.embedding import skin_embedding_method
 from ..mesh.tets import signed_volumes
+from .muscle import Muscle
 
 FORMAT = "invface-facemodel"
 VERSION = 1
@@ -33,7 +33,7 @@ def _split(data, offsets):
     return [data[offsets[i]:offsets[i + 1]] for i in range(len(offsets) - 1)]
 
 
-def save_bundle(model, path):
+def write_bundle(model, path):
     """Write ``model`` to ``path`` atomically."""
     path = Path(path)
     m = model
@@ -80,16 +80,7 @@ def save_bundle(model, path):
         arrays.update(parts_vertices=m.parts.vertices, parts_triangles=m.parts.triangles,
                       parts_albedo=m.parts.albedo, parts_jaw_weights=m.parts.jaw_weights,
                       parts_offsets=m.parts.offsets)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    savez(path, arrays)
 
 
 class _Reader:
@@ -134,9 +125,9 @@ class _Reader:
         return a
 
 
-def load_bundle(path):
-    """Read and validate a bundle; every problem raises BundleError naming path and field."""
-    from .facemodel import FaceModel, Muscle
+def read_bundle(path):
+    """Read and validate a bundle: the FaceModel's fields as a dict (``FaceModel(**fields)``);
+    every problem raises BundleError naming path and field."""
 
     path = Path(path)
     if not path.exists():
@@ -221,7 +212,7 @@ def load_bundle(path):
             skin_embedding_method(meta)
         except InvfaceError as e:
             r.fail("header", str(e))
-        return FaceModel(
+        return dict(
             neutral=neutral, triangles=triangles, blendshape_names=[str(s) for s in header["blendshape_names"]],
             blendshapes=blendshapes, jaw_pivot=r.get("jaw_pivot", "f", (3,)), jaw_frame=r.get("jaw_frame", "f", (3, 3)),
             jaw_weights=jaw_weights, rest_positions=X, tets=tets,

@@ -6,7 +6,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InvfaceError
+from .bundle import read_bundle, write_bundle
 from .controls import Controls
+from .muscle import Muscle  # noqa: F401 - FaceModel.muscles holds them; importable from here
 from .parts import InnerParts
 from .rig import BlendshapeRig, jaw_transform, skin
 
@@ -31,33 +33,6 @@ def _surface_factory(kind):
         module, _, name = f.partition(":")
         f = _SURFACE_MODELS[kind] = getattr(importlib.import_module(module), name)
     return f
-
-
-@dataclass
-class Muscle:
-    """One muscle embedded in the flesh mesh.
-
-    tets: (n,) flesh tet ids; fibers: (n,3) unit fibre directions; centerline: (P,3) m,
-    from origin (on bone) to insertion (skin/lips), closed rings repeat their first point;
-    activation_curve: (Q,2) piecewise-linear map from normalised centre-line length L/L0
-    to activation in [0, 1] (paper 000 Eq. 9); side: 'L', 'R' or 'M' (midline).
-    """
-    name: str
-    tets: np.ndarray
-    fibers: np.ndarray
-    centerline: np.ndarray
-    activation_curve: np.ndarray
-    side: str = "M"
-
-    @property
-    def rest_length(self) -> float:
-        """Rest length L0 (m) of the centre-line polyline (Eq. 9 at rest)."""
-        return float(np.linalg.norm(np.diff(self.centerline, axis=0), axis=1).sum())
-
-    def activation(self, length):
-        """Activation a(L) from the activation-length curve; length in metres."""
-        c = self.activation_curve
-        return np.interp(np.asarray(length) / self.rest_length, c[:, 0], c[:, 1])
 
 
 @dataclass
@@ -98,13 +73,11 @@ class FaceModel:
     @classmethod
     def load(cls, path) -> "FaceModel":
         """Load and validate a bundle; raises BundleError naming the bad field."""
-        from .bundle import load_bundle
-        return load_bundle(path)
+        return cls(**read_bundle(path))
 
     def save(self, path) -> None:
         """Write the bundle atomically (temporary file, then rename)."""
-        from .bundle import save_bundle
-        save_bundle(self, path)
+        write_bundle(self, path)
 
     @property
     def muscle_names(self):

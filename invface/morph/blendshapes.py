@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MeshError
-from ..mesh.meshfile import read_mesh
+from ..io.meshes import read_mesh
 
 ARKIT_52 = (
     "browDownLeft browDownRight browInnerUp browOuterUpLeft browOuterUpRight cheekPuff "

@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import ConfigError, MeshError
 from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.embedding import MLS
-from ..mesh.meshfile import read_mesh
+from ..io.meshes import read_mesh
 from ..mesh.tets import locate_near, quality_summary
 from ..model.facemodel import FaceModel
 from .blendshapes import read_blendshapes, recognised

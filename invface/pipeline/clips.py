@@ -133,7 +133,8 @@ class Clip:
     def _video_frames(self, sel):
         import cv2
         from ..render.camera import Camera
-        from ..render.plates import Plate, srgb_to_linear, undistort
+        from ..io.images import srgb_to_linear
+        from ..render.plates import Plate, undistort
         cap = cv2.VideoCapture(str(self.source))
         cam = None if self.camera is None or isinstance(self.camera, Camera) else Camera.load(self.camera)
         cam = cam if cam is not None else self.camera

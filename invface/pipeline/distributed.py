@@ -5,7 +5,7 @@
 
 The clip is split into contiguous chunks, one per worker (or ``chunks``); each chunk is one
 task that fits its frames in order, warm-started inside the chunk, exactly as the single-process
-run does (``sequence.fit_frames``), and writes each frame's files to ``out`` as it finishes
+run does (``frames.fit_frames``), and writes each frame's files to ``out`` as it finishes
 (so the workers must see ``out``: a local cluster always does, a remote one needs a shared
 file system). The model and the calibration are scattered to every worker once. A chunk's
 first frame has no predecessor in its task, so a second pass refits the first ``overlap``
@@ -23,7 +23,8 @@ from pathlib import Path
 
 from ..errors import InvfaceError
 from .plates import _say, model_kinds
-from .sequence import fit_frames, fit_record, start_from
+from .frames import fit_frames
+from .runs import fit_record, start_from
 
 RETRIES = 2
 
@@ -79,7 +80,7 @@ def fit_sequence_distributed(model, clip, calibration, out, kinds=("blendshape",
                              scheduler=None, chunks=None, overlap=1, progress=None, **options):
     """Fit a clip's frames on a Dask cluster: a ``distributed.LocalCluster`` of ``workers``
     single-threaded processes, or the running cluster at ``scheduler`` (an address). Options
-    as ``sequence.fit_frames``. progress receives {"done": frames, "total": frames} as frames
+    as ``frames.fit_frames``. progress receives {"done": frames, "total": frames} as frames
     finish and {"message": ...} for the passes. Returns the per-frame summaries in order."""
     from distributed import wait
     kinds = model_kinds(kinds)

@@ -69,7 +69,7 @@ def find_curves(model, plate, curves=None, detector=None):
     (``fit.curves.check_curves``). Returns ({name: (n, 2) px}, source)."""
     from ..fit.curves import check_curves, read_curves
     from ..fit.landmarks import curves_from_landmarks, detect_landmarks, face_mask
-    from ..render.plates import linear_to_srgb
+    from ..io.images import linear_to_srgb
     if isinstance(curves, dict):
         found, source = {k: np.asarray(v, float) for k, v in curves.items()}, "given"
     else:
@@ -161,7 +161,7 @@ class PlateCalibration:
         """Write the calibration (.npz) and PATH_compare.png (plate | render | 4x difference);
         returns both paths."""
         from ..fit.calibrate import comparison_image
-        from ..render.plates import write_image
+        from ..io.images import write_image
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         self.calibration.save(path)

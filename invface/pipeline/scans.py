@@ -48,7 +48,7 @@ class ScanResult:
     def save(self, folder):
         """Write fit.json, fit.npz, fitted.ply (each atomically) and the report; returns the page."""
         from ..fit.scan import write_scan_fit
-        from ..mesh.meshfile import write_mesh
+        from ..io.meshes import write_mesh
         from ..report.fit import write_report
         folder = Path(folder)
         write_scan_fit(folder, self.model, self.fit, **self._run())
@@ -80,7 +80,7 @@ def fit_scan(scan, model=None, kind="blendshape", mode="correspondence", lam=EQ1
     ``fit.scan.fit_scan``. Returns a ScanResult."""
     from ..errors import ConfigError
     from ..fit.scan import fit_scan as fit
-    from ..mesh.meshfile import read_mesh
+    from ..io.meshes import read_mesh
     from ..morph.target import UNITS, detect_unit
     from .models import load_model
     model = load_model(model)

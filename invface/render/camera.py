@@ -18,10 +18,7 @@ the face (``front_view``).
 """
 from __future__ import annotations
 
-import json
-import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -66,7 +63,7 @@ class Camera:
     @classmethod
     def load(cls, path):
         """Read a JSON camera file; a missing or malformed field raises CameraError naming it."""
-        from ..jsonfile import read_object
+        from ..io.jsonfile import read_object
         return cls.from_dict(read_object(path, CameraError, "camera file"), source=str(path))
 
     @classmethod
@@ -116,10 +113,8 @@ class Camera:
 
     def save(self, path):
         """Write the JSON camera file atomically."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(json.dumps(self.to_dict(), indent=1))
-        os.replace(tmp, path)
+        from ..io.jsonfile import write_object
+        write_object(path, self.to_dict())
 
     # ------------------------------------------------------------------ geometry
     @property

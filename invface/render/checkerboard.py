@@ -5,7 +5,7 @@ import numpy as np
 
 from ..errors import CameraError
 from .camera import Camera
-from .plates import linear_to_srgb, read_image
+from ..io.images import linear_to_srgb, read_image
 
 
 def board_points(inner, square):

@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError
+from ..io.atomic import write_text
+from ..io.meshes import write_ply
 from .camera import Camera
 from .integrator import NAME, ATTRIBUTE, register
 from .shading import pose_dr, vertex_radiance_dr
@@ -32,22 +34,6 @@ from .variant import mitsuba
 
 
 SCENE_TEMPLATE = Path(__file__).resolve().parents[2] / "scenes" / "face.xml"
-
-
-def write_ply(path, vertices, faces, colors):
-    """Binary PLY with float32 positions and float32 r, g, b (Mitsuba reads them as the
-    ``vertex_color`` attribute; vertex order is kept, unlike OBJ)."""
-    v = np.hstack([np.asarray(vertices, np.float32), np.asarray(colors, np.float32)])
-    f = np.asarray(faces, np.int32)
-    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\n"
-            + "".join(f"property float {c}\n" for c in ("x", "y", "z", "r", "g", "b"))
-            + f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n")
-    rec = np.zeros(len(f), dtype=[("n", "u1"), ("i", "<i4", (3,))])
-    rec["n"], rec["i"] = 3, f
-    with open(path, "wb") as fh:
-        fh.write(head.encode())
-        fh.write(v.astype("<f4").tobytes())
-        fh.write(rec.tobytes())
 
 
 class FaceRenderer:
@@ -245,9 +231,7 @@ class FaceRenderer:
         text = SCENE_TEMPLATE.read_text()
         for k in sorted(values, key=len, reverse=True):
             text = text.replace(f"${k}", values[k])
-        out = folder / "face.xml"
-        out.write_text(text)
-        return out
+        return write_text(folder / "face.xml", text)
 
     def image(self, x, gamma, albedo, rotation=None, translation=None, seed=None, spp=None, parts_x=None):
         """numpy (H, W, 4) float32 render (no gradients)."""

@@ -1,11 +1,11 @@
 """Contact sheet of a FaceModel's expression blendshapes (front and 3/4 views, labelled)."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
+from ..io.images import save_figure, write_display_image
 from ..render.preview import look_at_camera, render_meshes, to_srgb8
 from .preview import SKIN, VIEWS, parts_meshes
 
@@ -50,24 +50,15 @@ def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None, 
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    try:
+        return save_figure(path, fig)
+    finally:
+        plt.close(fig)
 
 
 def write_pose_preview(model, x, path, size=400, spp=16, w=None):
     """One PNG: the neutral (top) and the posed skin x (V, 3) m at controls w (bottom),
-    front and 3/4, written through a temporary file; returns the path."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    front and 3/4, written atomically; returns the path."""
     img = np.concatenate([np.concatenate(view_tiles(model, v, size, spp, c), 1)
                           for v, c in ((model.neutral, None), (x, w))], 0)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp.png")
-    plt.imsave(tmp, img)
-    os.replace(tmp, path)
-    return path
+    return write_display_image(path, img)

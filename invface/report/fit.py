@@ -22,17 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvfaceError
-from ..render.plates import linear_to_srgb
+from ..io.atomic import write_text
+from ..io.images import linear_to_srgb, save_figure, write_display_image
 
 
 def _png(path, rgb):
     """Write a float RGB image in [0, 1] (already display-encoded) as PNG, atomically."""
-    import cv2
-    img = (np.clip(rgb, 0, 1) * 255 + 0.5).astype(np.uint8)
-    tmp = Path(str(path) + ".tmp.png")
-    cv2.imwrite(str(tmp), img[..., ::-1])
-    os.replace(tmp, path)
-    return Path(path).name
+    return write_display_image(path, rgb).name
 
 
 def _heat(values, vmax):
@@ -48,11 +44,10 @@ def _figure(path, draw, size=(6, 3)):
     fig, ax = plt.subplots(figsize=size, dpi=110)
     draw(ax)
     fig.tight_layout()
-    tmp = Path(str(path) + ".tmp.png")
-    fig.savefig(tmp)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return Path(path).name
+    try:
+        return save_figure(path, fig).name
+    finally:
+        plt.close(fig)
 
 
 def _bars(path, values, title, unit):
@@ -285,8 +280,4 @@ def write_report(run, title=None, quick=False):
             "figure{margin:0}figure img{max-width:480px;border:1px solid #ddd}figcaption{font-size:80%;color:#555}"
             ".note{background:#fff6d5;padding:6px}</style></head><body>"
             f"<h1>{html.escape(title)}</h1><table><tr>{head}</tr>{body}</table>{''.join(sections)}</body></html>")
-    out = run / "index.html"
-    tmp = run / "index.html.tmp"
-    tmp.write_text(page)
-    os.replace(tmp, out)
-    return out
+    return write_text(run / "index.html", page)

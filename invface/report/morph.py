@@ -7,11 +7,11 @@ When the build stops, ``write_failure_preview`` draws the scan with what was fou
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
+from ..io.images import write_display_image
 from ..render.preview import look_at_camera, render_meshes, to_srgb8
 from .preview import SKIN, VIEWS, scenes
 
@@ -48,7 +48,6 @@ def render_row(meshes, size, spp):
 
 def write_morph_preview(model, result, folder, template=None, size=420, spp=12):
     """Write the morph contact sheet ``morph_sheet.png`` (and its panels) into ``folder``."""
-    import matplotlib.pyplot as plt
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -60,17 +59,13 @@ def write_morph_preview(model, result, folder, template=None, size=420, spp=12):
     rows.update({"morphed_skin": sc["skin"], "muscles": sc["skin_muscles"], "bone": sc["bone"]})
     images = [render_row(meshes, size, spp) for meshes in rows.values()]
     sheet = folder / "morph_sheet.png"
-    tmp = folder / "morph_sheet.tmp.png"
-    plt.imsave(tmp, np.concatenate(images, 0))
-    os.replace(tmp, sheet)
-    return sheet
+    return write_display_image(sheet, np.concatenate(images, 0))
 
 
 def write_failure_preview(found, folder, size=420, spp=12):
     """When the builder stopped (morph.build.BuildFailed.found): the aligned scan with the
     landmarks and curves found by then, front and 3/4, as ``failed_build.png`` in ``folder``.
     Returns its path, or None when the scan was never aligned."""
-    import matplotlib.pyplot as plt
 
     if found.get("aligned") is None:
         return None
@@ -78,7 +73,4 @@ def write_failure_preview(found, folder, size=420, spp=12):
     folder.mkdir(parents=True, exist_ok=True)
     meshes = _marked(found["aligned"], found["target"].faces, found.get("landmarks"), found.get("curves"), GREY)
     path = folder / "failed_build.png"
-    tmp = folder / "failed_build.tmp.png"
-    plt.imsave(tmp, render_row(meshes, size, spp))
-    os.replace(tmp, path)
-    return path
+    return write_display_image(path, render_row(meshes, size, spp))

@@ -5,12 +5,12 @@ Writes PNG files (front and 3/4 views) into a folder; used by ``invface build-mo
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
 from ..mesh.tets import boundary_faces
+from ..io.images import write_display_image
 from ..render.preview import look_at_camera, render_meshes, to_srgb8
 
 SKIN = (0.80, 0.60, 0.50)
@@ -95,7 +95,6 @@ def scenes(model, jaw_open=0.25):
 
 def write_previews(model, folder, size=480, spp=16):
     """Render every preview scene from each view into ``folder``; returns the PNG paths."""
-    import matplotlib.pyplot as plt
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -110,13 +109,10 @@ def write_previews(model, folder, size=480, spp=16):
             cam = look_at_camera(eye, (0.0, 0.02, 0.04), fov=30, width=size, height=size, spp=spp)
             img = to_srgb8(render_meshes(meshes, cam))
             p = folder / f"{name}_{view}.png"
-            tmp = p.with_suffix(".tmp.png")
-            plt.imsave(tmp, img)
-            os.replace(tmp, p)
-            paths.append(p)
+            paths.append(write_display_image(p, img))
             row.append(img)
         rows.append(np.concatenate(row, 1))
     sheet = folder / "contact_sheet.png"
-    plt.imsave(sheet, np.concatenate(rows, 0))
+    write_display_image(sheet, np.concatenate(rows, 0))
     paths.append(sheet)
     return paths

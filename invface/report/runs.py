@@ -1,5 +1,5 @@
 """What a fit run folder holds and what its run was meant to hold (``run.json``, written
-by ``pipeline.sequence.start_run`` as a run starts): the reports name what a stopped run left
+by ``pipeline.runs.start_run`` as a run starts): the reports name what a stopped run left
 out, and a new run finds an earlier one's results."""
 from __future__ import annotations
 

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import html
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InvfaceError
+from ..io.atomic import write_text
 from .fit import COMPARE, _figure
 from .runs import run_notes
 
@@ -116,8 +116,4 @@ def write_sequence_report(run, title=None):
             + (f"<p>Files: {files}</p>" if files else "")
             + "".join(f"<p class=note>{html.escape(n)}</p>" for n in run_notes(run))
             + "".join(sections) + "</body></html>")
-    out = run / "index.html"
-    tmp = run / "index.html.tmp"
-    tmp.write_text(page)
-    os.replace(tmp, out)
-    return out
+    return write_text(run / "index.html", page)

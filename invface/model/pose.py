@@ -1,5 +1,6 @@
-"""The rigid head pose of every fit: x_R = R(theta) x(p) + t, for the fit vector
-z = (p, theta, t) laid out by ``model.controls.FitVector``.
+"""The rigid head pose of every fit and render: x_R = R(theta) x(p) + t, for the fit vector
+z = (p, theta, t) laid out by ``controls.FitVector``. It sits in the model layer, below the
+Dr.Jit bridge and the fit, which both pose surfaces.
 
 R(theta) = Rz Ry Rx (``model.rig.euler_xyz``); x(p) is a surface model's (the blendshape rig or
 the driven simulation). Derivatives: the full Jacobian (for the dogleg's Gauss-Newton
@@ -9,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.rig import euler_xyz, euler_xyz_derivatives
+from .rig import euler_xyz, euler_xyz_derivatives
 
 
 def pose_points(x, rotation, translation):
@@ -57,27 +58,3 @@ def posed_vjp(surface_model, z, vec, g_xr, x=None):
     gp = surface_model.surface_vjp(p, g @ euler_xyz(th))                # x_R = x R^T: dL/dx = g R
     gth = np.einsum("kij,vj,vi->k", euler_xyz_derivatives(th), x, g)
     return np.concatenate([gp, gth, g.sum(0)])
-
-
-def temporal_prior(vec, previous, temporal):
-    """A sequence's temporal term |(z - previous) / scales|^2 times ``temporal``: (centre
-    previous (size,), row weights sqrt(temporal) / ``vec.scales()`` (size,)) for
-    ``prior_rows``, or None when there is no previous frame or the weight is 0."""
-    if previous is None or temporal <= 0:
-        return None
-    return np.asarray(previous, float), np.sqrt(temporal) / vec.scales()
-
-
-def prior_rows(z, prior):
-    """Rows w (z - c) (size,) of a prior (c, w) (``temporal_prior``) and their Jacobian diag(w)."""
-    c, w = prior
-    return w * (np.asarray(z, float) - c), np.diag(w)
-
-
-def regulariser(z, vec, lam, center=None):
-    """Rows sqrt(lam) (p - center) (P,) and their Jacobian (P, vec.size): the lambda |w|^2
-    terms of Eq. 13 and 15 and Eq. 16's lambda_2 |w - w^|^2 (center: default 0)."""
-    c = 0 if center is None else center
-    J = np.zeros((vec.P, vec.size))
-    J[:, vec.controls] = np.sqrt(lam) * np.eye(vec.P)
-    return np.sqrt(lam) * (np.asarray(z, float)[vec.controls] - c), J

@@ -1,0 +1,119 @@
+"""The frame loop of a sequence: each frame fitted in order, warm-started from the last
+unflagged one, written as it finishes, skipped when finished before from the same inputs.
+
+A frame is flagged (``fit.json`` "flagged", the curves file's "flagged" column, the report)
+when its curve RMS is far above the frames before it (``FLAG_RMS_RATIO`` times their median
+and ``FLAG_RMS_PX`` more) or its lip volume changes by more than ``FLAG_LIP_VOLUME``: a hand
+over the mouth, a lost track. It does not start the next frame, and the curves file gives it
+the controls interpolated from its unflagged neighbours.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InvfaceError
+from .plates import _say, fit_frame, model_kinds
+from .runs import finished_record, frame_hash, start_from
+
+FLAG_RMS_RATIO = 3.0     # curve RMS above this many times the median of the previous frames ...
+FLAG_RMS_PX = 4.0        # ... and above it by this many px
+FLAG_LIP_VOLUME = 0.20   # |lip volume change| above this (simulation: within 3 %; the rig at a true smile: 10 %)
+FLAG_WINDOW = 8          # previous unflagged frames the median is taken over
+
+
+def flag_reason(rms, lip_volume, previous):
+    """Why a frame's fit is implausible ('' when it is not): its curve RMS (px) against the
+    unflagged previous frames' RMS (list), its lip volume change (fraction)."""
+    why = []
+    if len(previous) >= 2:
+        med = float(np.median(previous[-FLAG_WINDOW:]))
+        if rms > FLAG_RMS_RATIO * med and rms > med + FLAG_RMS_PX:
+            why.append(f"curve RMS {rms:.1f} px against a median of {med:.1f} px over the frames before")
+    if abs(lip_volume) > FLAG_LIP_VOLUME:
+        why.append(f"lip volume change {100 * lip_volume:+.1f} %")
+    return "; ".join(why)
+
+
+def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=0, stop=None, starts=None,
+               curves=None, inputs="", skip=True, record=None, keep=False, progress=None, on_kind=None,
+               on_frame=None, **options):
+    """Fit the clip's frames at positions [start, stop) in order, each warm-started from the
+    last unflagged one (``starts``: {kind: start} for the first; a record from ``start_from``
+    or a PlateFit), writing each kind of each frame to out/<frame>/<kind>/ (out/ for a clip
+    of one frame) as it finishes with its ``input_hash``; with ``skip`` frames already
+    finished from the same inputs are read, not fitted; ``record``: more keys for fit.json;
+    ``keep``: each summary's "fit" holds the frame's FrameFit (None when skipped).
+    A frame of a longer clip that cannot be fitted at all (no face found, no kind finished)
+    is reported in its summary's "error" and the run goes on. A sequence frame's page has the
+    plate, render and curve pictures only (``invface report`` on its folder adds the rest).
+    ``fit_frame`` options (iterations, shading, lam_curves, solver, title, notes). Returns one summary dict per
+    frame: {name, index, time, skipped, kinds: {kind: {curve_rms_px, flagged}}, failed, error}."""
+    from ..fit.landmarks import LandmarkTracker
+    kinds = model_kinds(kinds)
+    starts = dict(starts or {})
+    history = {k: [] for k in kinds}
+    rows = []
+    single = len(clip) == 1
+    with LandmarkTracker() as tracker:
+        for frame in clip.frames(start, stop):
+            folder = None if out is None else Path(out) if single else Path(out) / frame.name
+            h = frame_hash(frame.digest, inputs)
+            done = {k: finished_record(folder, k, h) for k in kinds} if (skip and folder is not None) else {}
+            done = {k: r for k, r in done.items() if r is not None}
+            row = {"name": frame.name, "index": frame.index, "time": frame.time, "skipped": sorted(done),
+                   "kinds": {}, "failed": {}}
+            for k, rec in done.items():
+                row["kinds"][k] = {"curve_rms_px": rec.get("curve_rms_px"), "flagged": rec.get("flagged", "")}
+                if not rec.get("flagged"):
+                    starts[k] = start_from(model, rec)
+                    history[k].append(rec.get("curve_rms_px", 0.0))
+            todo = tuple(k for k in kinds if k not in done)
+            if not todo:
+                _say(progress, message=f"{frame.name}: finished before from the same inputs, skipped")
+                rows.append(row)
+                if on_frame is not None:
+                    on_frame(None, folder, row)
+                continue
+            _say(progress, message=f"frame {frame.name} (t = {frame.time:.2f} s)")
+
+            def detector(image, name, t=frame.time):
+                return tracker(image, t, name)
+
+            def finished(ff, kind, folder=folder):
+                fit = ff.fits[kind]
+                why = flag_reason(fit.curve_rms_px, fit.lip_volume_change, history[kind])
+                ff.record[kind] = {"input_hash": h, "run_inputs": inputs, "frame": frame.index, "time": frame.time,
+                                   "flagged": why, **(record or {})}
+                if why:
+                    ff.warnings.append(f"{ff.name} {kind}: flagged: {why}; the next frame does not start from it")
+                if folder is not None:
+                    ff.save_kind(folder, kind)
+                if on_kind is not None:
+                    on_kind(ff, kind)
+            try:
+                ff = fit_frame(model, frame.plate, calibration, curves, kinds=todo, starts=starts,
+                               progress=progress, on_kind=finished, detector=detector, **options)
+            except InvfaceError as e:
+                if single:
+                    raise
+                row["error"] = str(e)
+                _say(progress, message=f"{frame.name}: not fitted: {e}")
+                rows.append(row)
+                continue
+            if folder is not None and ff.fits:
+                ff.save(folder, quick=not single)
+            for k, fit in ff.fits.items():
+                why = ff.record[k]["flagged"]
+                row["kinds"][k] = {"curve_rms_px": fit.curve_rms_px, "flagged": why}
+                if not why:
+                    starts[k] = fit
+                    history[k].append(fit.curve_rms_px)
+            row["failed"] = dict(ff.failed)
+            if keep:
+                row["fit"] = ff
+            rows.append(row)
+            if on_frame is not None:
+                on_frame(ff, folder, row)
+    return rows

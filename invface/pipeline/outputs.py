@@ -1,0 +1,123 @@
+"""A sequence's outputs, made from its frames' fit.json records: the animation curves
+(curves.csv / curves.json), one overlay MP4 per kind and the sequence page."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..io.images import linear_to_srgb
+from ..io.jsonfile import write_object
+from ..io.tables import write_csv
+from ..io.video import VideoWriter
+
+
+def sequence_records(out, kinds):
+    """{kind: [fit.json dicts in frame order]} of a sequence folder (frames ordered by their
+    'frame' index, else by name)."""
+    recs = {}
+    for kind in kinds:
+        found = []
+        for f in sorted(Path(out).glob(f"*/{kind}/fit.json")):
+            try:
+                found.append(dict(json.loads(f.read_text()), _name=f.parent.parent.name))
+            except ValueError:
+                continue
+        recs[kind] = sorted(found, key=lambda r: (r.get("frame", 0), r["_name"]))
+    return recs
+
+
+def curve_rows(records):
+    """The animation curves of one kind's frame records: a list of {column: value} with frame,
+    time, name, flagged, weight_*, jaw_*, rotation_*, translation_*, activation_*. A flagged
+    frame's controls are interpolated (linearly in time) from its nearest unflagged neighbours."""
+    from ..model.rig import JAW_NAMES
+    rows = []
+    for r in records:
+        row = {"frame": r.get("frame", len(rows)), "time": r.get("time", float(len(rows))), "name": r["_name"],
+               "flagged": r.get("flagged", "")}
+        row.update({f"weight_{k}": v for k, v in r.get("weights", {}).items()})
+        row.update({n: v for n, v in zip(JAW_NAMES, r.get("jaw", []))})
+        row.update({f"rotation_{a}": v for a, v in zip("xyz", r.get("rotation", []))})
+        row.update({f"translation_{a}": v for a, v in zip("xyz", r.get("translation", []))})
+        row.update({f"activation_{k}": v for k, v in r.get("activations", {}).items()})
+        rows.append(row)
+    good = [i for i, r in enumerate(rows) if not r["flagged"]]
+    if good and len(good) < len(rows):
+        t = np.array([r["time"] for r in rows], float)
+        cols = [c for c in rows[0] if c not in ("frame", "time", "name", "flagged")]
+        for c in cols:
+            v = np.array([rows[i].get(c, 0.0) for i in good], float)
+            for i, r in enumerate(rows):
+                if r["flagged"]:
+                    r[c] = float(np.interp(t[i], t[good], v))
+    return rows
+
+
+def jitter(rows):
+    """Frame-to-frame jitter of one kind's curve rows (``curve_rows``): the RMS over frames and
+    entries of the second difference of the controls and pose in ``FitVector.scales()`` units
+    (0.1 weight, 0.01 rad, 1 mm); nan with fewer than 3 frames. A smooth motion sampled
+    finely has little; a fit that flickers between answers has much."""
+    from ..model.controls import JAW_SCALES, ROTATION_SCALE, TRANSLATION_SCALE, WEIGHT_SCALE
+    from ..model.rig import JAW_NAMES
+    if len(rows) < 3:
+        return float("nan")
+    cols = [c for c in rows[0] if c.startswith("weight_")]
+    scale = [WEIGHT_SCALE] * len(cols) + list(JAW_SCALES) + [ROTATION_SCALE] * 3 + [TRANSLATION_SCALE] * 3
+    cols += JAW_NAMES + [f"rotation_{a}" for a in "xyz"] + [f"translation_{a}" for a in "xyz"]
+    z = np.array([[float(r.get(c, 0.0)) for c in cols] for r in rows]) / np.array(scale)
+    return float(np.sqrt(np.mean(np.diff(z, 2, axis=0) ** 2)))
+
+
+def write_curves_files(out, kinds):
+    """out/curves.csv (one row per kind and frame: kind, frame, time, name, flagged, then every
+    control, pose and activation) and out/curves.json ({kind: {columns: [...], rows: [[...]]}}),
+    each written atomically. Returns both paths."""
+    per_kind = {k: curve_rows(v) for k, v in sequence_records(out, kinds).items() if v}
+    columns = {k: list(dict.fromkeys(c for r in rows for c in r)) for k, rows in per_kind.items()}
+    data = {k: {"columns": columns[k], "rows": [[r.get(c, "") for c in columns[k]] for r in rows]}
+            for k, rows in per_kind.items()}
+    write_object(Path(out) / "curves.json", data)
+    all_cols = list(dict.fromkeys(c for cols in columns.values() for c in cols))
+    table = [[k, *[r.get(c, "") for c in all_cols]] for k, rows in per_kind.items() for r in rows]
+    path = write_csv(Path(out) / "curves.csv", ["kind", *all_cols], table)
+    return path, Path(out) / "curves.json"
+
+
+def write_overlay_video(out, kind, fps=24.0, height=360):
+    """out/overlay_<kind>.mp4: per frame, plate | render | wipe (plate left of the middle,
+    render right of it), sRGB, each panel ``height`` px tall; written to a temporary file
+    and renamed. None when the kind has no frames."""
+    import cv2
+    files = sorted(Path(out).glob(f"*/{kind}/fit.npz"))
+    recs = {r["_name"]: r for r in sequence_records(out, [kind])[kind]}
+    files = sorted(files, key=lambda f: (recs.get(f.parent.parent.name, {}).get("frame", 0), f.parent.parent.name))
+    if not files:
+        return None
+    path = Path(out) / f"overlay_{kind}.mp4"
+    with VideoWriter(path, fps) as video:
+        for f in files:
+            with np.load(f, allow_pickle=False) as d:
+                plate, render = d["plate"], d["render"]
+            h, w = plate.shape[:2]
+            wipe = plate.copy()
+            wipe[:, w // 2:] = render[:, w // 2:]
+            panel = np.concatenate([plate, render, wipe], 1)
+            img = (np.clip(linear_to_srgb(panel), 0, 1) * 255 + 0.5).astype(np.uint8)
+            scale = height / h
+            img = cv2.resize(img, (int(round(img.shape[1] * scale / 2)) * 2, height), interpolation=cv2.INTER_AREA)
+            cv2.line(img, (img.shape[1] * 5 // 6, 0), (img.shape[1] * 5 // 6, height), (255, 255, 255), 1)
+            video.write(img)
+    return path
+
+
+def write_sequence_outputs(out, kinds, fps=0.0):
+    """The sequence's files from its frames' records: curves.csv/json, one overlay MP4 per
+    kind and the sequence page (index.html). Returns their paths."""
+    from ..report.sequence import write_sequence_report
+    paths = list(write_curves_files(out, kinds))
+    paths += [p for k in kinds if (p := write_overlay_video(out, k, fps or 24.0)) is not None]
+    paths.append(write_sequence_report(out))
+    return paths
