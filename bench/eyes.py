@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 import invface
+from invface.sim.contact import EyeballContacts
 from invface.sim.quasistatic import Simulator
 
 
@@ -37,7 +38,7 @@ def main(resolution):
     r = s.solve(a)
     print(f"  palpebral orbicularis alone at 1.0: {fissure(m, m.embedded_surface(r.X)):.2f} mm "
           f"({r.iterations} Newton iterations)")
-    print(f"  lid vertices paired with the eyeballs: {len(s.collisions.eyes)}; "
+    print(f"  lid vertices paired with the eyeballs: {len(s.contacts.of(EyeballContacts))}; "
           f"cranium-fixed vertices {len(m.fixed_cranium)}")
 
 

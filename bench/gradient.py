@@ -22,6 +22,7 @@ import numpy as np
 import invface
 from invface.model import FitVector
 from invface.sim.adjoint import Sensitivity, cold_finite_differences
+from invface.sim.contact import TriangleContacts
 from invface.sim.driven import DrivenSimulation
 from invface.sim.poisson import track_displacements
 
@@ -57,7 +58,7 @@ def finite_difference_check(model):
     p = model.parameters({"weights": {"lipCornerPull_L": 0.3, "lipPucker": 0.3, "browInnerUp_L": 0.2},
                           "jaw": [0.05, 0, 0, 0, 0, 0]})
     r, t = timed(lambda: ds.solve(p, warm=None, rtol=1e-10))
-    acting = ds.sim.collisions.acting(r.X, model.jaw_matrix(ds.split(p)[1]))
+    acting = ds.sim.contacts.of(TriangleContacts).acting(r.X, model.jaw_matrix(ds.split(p)[1]))
     print(f"  cold solve {t:.1f} s, {acting.sum()} contacts acting")
     gx = np.random.default_rng(0).standard_normal(model.neutral.shape)
     g = ds.surface_vjp(p, gx)

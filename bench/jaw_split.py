@@ -29,9 +29,10 @@ import trimesh
 
 import invface
 from invface.mesh.embedding import barycentric_matrix, embedding_matrix
-from invface.mesh.meshfile import read_mesh
+from invface.io.meshes import read_mesh
 from invface.mesh.triangles import umbrella
 from invface.morph.build import build_model
+from invface.sim.contact import TriangleContacts
 from invface.sim.driven import DrivenSimulation
 
 ICT = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit"
@@ -95,7 +96,7 @@ def main():
 def deepest(ds, result):
     """The deepest penetration (mm) of the acting contacts of a DrivenSimulation's solved
     state: flesh on flesh, flesh on the cranium (upper teeth), flesh on the jaw (lower teeth)."""
-    c = ds.sim.collisions
+    c = ds.sim.contacts.of(TriangleContacts)
     if c is None or not len(c):
         return "no contacts"
     M = ds.model.jaw_matrix(ds.split(result.p)[1])

@@ -37,6 +37,7 @@ from scipy.stats import qmc
 import invface
 from invface.errors import SimulationError
 from invface.model.rig import JAW_LOWER, JAW_NAMES, JAW_UPPER
+from invface.sim.contact import TriangleContacts
 
 ICT = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit"
 
@@ -47,7 +48,7 @@ def load(name, resolution):
     if name == "ict":
         import trimesh
 
-        from invface.mesh.meshfile import read_mesh
+        from invface.io.meshes import read_mesh
         from invface.morph.build import build_model
         V, F = read_mesh(ICT / "neutral.obj")
         ex = np.load(ICT / "expressions.npz")
@@ -105,7 +106,7 @@ def main():
     model = load(a.model, a.resolution)
     ds = model.surface_model("simulation")
     print(f"model {a.model}: {len(model.tets)} tets, {len(model.blendshape_names)} blendshapes, "
-          f"{len(ds.sim.collisions or [])} contacts; ready in {time.perf_counter() - t0:.0f} s", flush=True)
+          f"{len(ds.sim.contacts or [])} contacts; ready in {time.perf_counter() - t0:.0f} s", flush=True)
     rows, done = [], {}
     if a.results and Path(a.results).is_file():
         for line in Path(a.results).read_text().splitlines():
@@ -125,7 +126,7 @@ def main():
             rows.append((group, label, False, np.nan, 0, np.nan, 0, time.perf_counter() - t, 0.0))
             continue
         sec = time.perf_counter() - t
-        depth = penetration(ds.sim.collisions, r.X, model.jaw_matrix(r.jaw))
+        depth = penetration(ds.sim.contacts.of(TriangleContacts), r.X, model.jaw_matrix(r.jaw))
         rows.append((group, label, bool(r.converged), float(r.residuals[-1]) if r.residuals else np.nan,
                      int(r.inverted), float(r.min_J), int(r.load_steps), sec, depth))
         if a.results:

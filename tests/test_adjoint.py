@@ -7,6 +7,7 @@ import pytest
 from invface.errors import ControlsError, InvfaceError
 from invface.mesh.tets import laplacian
 from invface.sim.adjoint import Sensitivity, cold_finite_differences
+from invface.sim.contact import TriangleContacts
 from invface.sim.driven import DrivenSimulation
 from invface.sim.poisson import PoissonTransfer
 
@@ -120,7 +121,7 @@ def test_adjoint_matches_cold_finite_differences_with_contacts_acting(small_expr
                                   "browInnerUp_L": 0.3},
                       "jaw": [-0.04, 0.02, -0.01, 0.0005, -0.0004, 0.0003]})
     r = ds.solve(p, warm=None, rtol=1e-10)
-    c, jm = ds.sim.collisions, m.jaw_matrix(ds.split(p)[1])
+    c, jm = ds.sim.contacts.of(TriangleContacts), m.jaw_matrix(ds.split(p)[1])
     acting, kinds = c.acting(r.X, jm), c.kinds()
     assert (acting & kinds["flesh"]).sum() > 20 and (acting & kinds["jaw"]).sum() > 5
     gx = np.random.default_rng(3).standard_normal(m.neutral.shape)
@@ -245,7 +246,7 @@ def test_posed_bridge_is_one_adjoint_product_of_the_pose_and_the_model(small_exp
     and matches finite differences on the rig in every entry kind (a weight, the jaw,
     rotation, translation); its forward pass is the posed Jacobian."""
     from invface.bridge import PosedSurfaceFunction
-    from invface.fit.pose import posed_jacobian, posed_surface
+    from invface.model.pose import posed_jacobian, posed_surface
     from invface.model import FitVector
     m = small_expressive_model
     vec = FitVector.of(m)

@@ -5,6 +5,7 @@ from meshes import box_tets
 
 from invface.errors import InvfaceError, MeshError
 from invface.sim import linsolve, materials
+from invface.sim.contact import EyeballContacts, TriangleContacts
 from invface.sim.fem import Elements, FleshModel, Pattern
 from invface.sim.quasistatic import Simulator
 from invface.sim.tracks import MuscleTracks, Tracks, activation_slopes
@@ -320,7 +321,7 @@ def test_load_step_predictor_is_second_order(sim):
 def test_contact_gap_and_energy_derivatives_match_finite_differences():
     """The plane gap of a point and a triangle and the gated penalty of a contact are C2
     functions of the 12 coordinates: gradients and Hessians against central differences."""
-    from invface.sim.collisions import contact_energy, plane_gap
+    from invface.sim.contact.triangles import contact_energy, plane_gap
     rng = np.random.default_rng(5)
     q = 0.01 * rng.standard_normal((6, 12))
     gap = plane_gap(*(q[:, 3 * i:3 * i + 3] for i in range(4)), order=0)
@@ -342,7 +343,7 @@ def test_contact_gap_and_energy_derivatives_match_finite_differences():
 
 
 def test_contacts_push_back_penetration(sim):
-    c = sim.collisions
+    c = sim.contacts.of(TriangleContacts)
     X, M = sim.model.rest_positions, np.eye(4)
     assert len(c) > 0 and np.all(c.gaps(X, M) > -1e-12) and c.energy(X, M) == 0
     # push a lip vertex into the facing lip: positive energy, force out of the other lip
@@ -372,7 +373,7 @@ def test_contact_projection_lifts_only_the_contacts_negative_curvature(sim):
     contact's 12x12 Hessian to PSD with the flesh's terms exact: the correction added to the
     exact matrix is PSD, touches only the acting contacts' vertices, and the contacts' part
     of the corrected matrix is PSD where the exact one was not."""
-    c, pat = sim.collisions, sim.pattern
+    c, pat = sim.contacts.of(TriangleContacts), sim.pattern
     X, M = sim.model.rest_positions.copy(), np.eye(4)
     rng = np.random.default_rng(7)
     lips = np.unique(c.v[c.flesh])                             # lips and lids
@@ -380,9 +381,9 @@ def test_contact_projection_lifts_only_the_contacts_negative_curvature(sim):
     acting = c.acting(X, M)
     assert acting.sum() > 10
     delta = sim._contact_projection(X, M)
-    exact = pat.assemble(None, c.blocks(X, M))
+    exact = pat.assemble(None, sim.contacts.blocks(X, M))
     rows = np.flatnonzero(np.abs(pat.matrix(delta, full=True)).sum(1).A1 > 0)
-    ids = np.unique(np.concatenate([c.v[acting], c.tri[acting].ravel(), c.eyes.terms(X, 0)[0]]))
+    ids = np.unique(np.concatenate([c.v[acting], c.tri[acting].ravel(), sim.contacts.of(EyeballContacts).terms(X, 0)[0]]))
     dof = sim.dof_of_vertex[ids[ids < sim.N]]
     touched = (3 * dof[dof >= 0, None] + np.arange(3)).ravel()
     assert len(rows) > 0 and np.isin(rows, touched).all()
@@ -397,7 +398,7 @@ def test_lids_slide_on_the_eyeballs(sim):
     """The lids' inner layer is free and kept outside the eyeball by its sphere contact: the
     contact's gradient and Hessian against finite differences, and pushing a lid vertex into
     the eyeball gives an outward force."""
-    e = sim.collisions.eyes
+    e = sim.contacts.of(EyeballContacts)
     X = sim.model.rest_positions
     assert len(e) > 0 and np.all(e.rest_gap == 0.0) and len(e.terms(X, 0)[0]) == 0
     assert np.all(sim.dof_of_vertex[e.v] >= 0)                      # free: they slide
@@ -410,7 +411,7 @@ def test_lids_slide_on_the_eyeballs(sim):
     Xr = Xp + 5e-5 * rng.standard_normal(X.shape)
     dX = rng.standard_normal(X.shape)
     h = 1e-9
-    c = sim.collisions
+    c = sim.contacts
     fd = (c.energy(Xr + h * dX, np.eye(4)) - c.energy(Xr - h * dX, np.eye(4))) / (2 * h)
     assert np.isclose(fd, np.sum(c.gradient(Xr, np.eye(4)) * dX), rtol=1e-5)
     dg = (c.gradient(Xr + h * dX, np.eye(4)) - c.gradient(Xr - h * dX, np.eye(4))) / (2 * h)
@@ -537,7 +538,7 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
                            CG_RTOL=Simulator.CG_RTOL, CG_ITER=Simulator.CG_ITER, CG_GATE=Simulator.CG_GATE,
                            EXACT_BELOW=Simulator.EXACT_BELOW,
                            force_scale=1e6,
-                           collisions=object() if contacts else None,
+                           contacts=object() if contacts else None,
                            SHIFTS=Simulator.SHIFTS, CONTACT_SHIFTS=Simulator.CONTACT_SHIFTS,
                            _contact_projection=lambda X, jm: C.ravel().copy(),
                            _contact_region_indefinite=lambda X, jm, v: region.append(
@@ -620,7 +621,7 @@ def test_the_contact_region_test_proves_a_newton_matrix_indefinite_near_the_cont
     from invface.sim import linsolve
     r = sim.solve({n: 0.8 for n in sim.muscle_names if n.startswith("orbicularis")})
     jm = sim.model.jaw_matrix(r.jaw)
-    verts = sim.collisions.acting_vertices(r.X, jm)
+    verts = sim.contacts.acting_vertices(r.X, jm)
     bad = r.newton_data.copy()
     bad[sim.pattern.diag_slot[3 * sim.dof_of_vertex[verts[0]]]] *= -1
     assert not sim._contact_region_indefinite(r.X, jm, bad)          # too large a region to test
@@ -709,19 +710,19 @@ def test_contact_gates_do_not_narrow_below_the_minimum_radius(small_model, monke
     model, every pair's gate reaches the minimum, and the pairs are a superset of those 1.5
     edges find."""
     from invface.sim import quasistatic
-    from invface.sim.collisions import MIN_CONTACT_RADIUS
+    from invface.sim.contact import MIN_CONTACT_RADIUS
 
     narrow = Simulator(small_model)
-    assert narrow.collisions.radius == pytest.approx(1.5 * narrow.edge_length)
-    assert narrow.collisions.radius > MIN_CONTACT_RADIUS
-    wide_radius = 2.0 * narrow.collisions.radius
+    assert narrow.contacts.of(TriangleContacts).radius == pytest.approx(1.5 * narrow.edge_length)
+    assert narrow.contacts.of(TriangleContacts).radius > MIN_CONTACT_RADIUS
+    wide_radius = 2.0 * narrow.contacts.of(TriangleContacts).radius
     monkeypatch.setattr(quasistatic, "MIN_CONTACT_RADIUS", wide_radius)
     wide = Simulator(small_model)
-    assert wide.collisions.radius == wide_radius
-    assert np.all(wide.collisions.reach[:, 1] == wide_radius)
+    assert wide.contacts.of(TriangleContacts).radius == wide_radius
+    assert np.all(wide.contacts.of(TriangleContacts).reach[:, 1] == wide_radius)
     pairs = lambda c: set(zip(c.v.tolist(), map(tuple, c.tri.tolist())))
-    assert len(wide.collisions) > len(narrow.collisions)
-    assert pairs(narrow.collisions) <= pairs(wide.collisions)
+    assert len(wide.contacts.of(TriangleContacts)) > len(narrow.contacts.of(TriangleContacts))
+    assert pairs(narrow.contacts.of(TriangleContacts)) <= pairs(wide.contacts.of(TriangleContacts))
 
 
 def test_simulator_refuses_material_constants_without_a_finite_rest_energy(small_model):

@@ -15,9 +15,9 @@ so a gradient costs one adjoint solve whatever K is: a few back-substitutions wi
 solve's last factorisation of an exact Hessian (``SimResult.solve_adjoint``), no
 factorisation of its own.
 
-Collisions: the contact energy (sim.collisions) is a C2 function of the flesh positions and
+Contacts: the contact energy (sim.contact) is a C2 function of the flesh positions and
 the jaw transform, and its full Hessian is in the Newton matrix H, so with the jaw
-triangles' motion (``Collisions.jaw_derivative``) in dr/dp these are the derivatives of the
+triangles' motion (``ContactModel.jaw_derivative``) in dr/dp these are the derivatives of the
 equilibrium as a function of p, whatever state the solve started from.
 """
 from __future__ import annotations
@@ -54,7 +54,7 @@ class Sensitivity:
         self.jaw_vertices = j = model.fixed_jaw
         self.dXc[jaw_rows, j] = np.einsum("pab,nb->pna", dM[:, :3, :3], model.rest_positions[j]) + dM[:, None, :3, 3]
         self.pull = sim.flesh.fibre_pull(X)                                    # (Q,3)
-        col = sim.collisions
+        col = sim.contacts
         self.dcontact = col.jaw_derivative(X, jm, dM) if col is not None else np.zeros((6, self.N, 3))
         # exact element stiffness of the tets on the jaw's constrained vertices: the only ones
         # whose stiffness meets dX^C/dj (H_UC dX^C/dj, and mu . H_UC dX^C/dj)

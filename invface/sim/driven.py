@@ -7,7 +7,7 @@
 Given blendshape weights b and jaw parameters j, the muscle track targets M_m(b, j) (Eq. 7)
 and centre-lines C_m(b, j) (Eq. 8) follow from the Poisson precompute (sim.poisson), the
 centre-line lengths (Eq. 9) give the activations a_m(L_m), the jaw gives the constrained
-vertices X^C(j), and Eq. 6 (FVM + collisions + tracks) is solved for X^U by Newton.
+vertices X^C(j), and Eq. 6 (FVM + contacts + tracks) is solved for X^U by Newton.
 Derivatives with respect to p are in sim.adjoint.
 """
 from __future__ import annotations
@@ -45,9 +45,9 @@ class DrivenSimulation:
     """
 
     def __init__(self, model, material=None, track_stiffness=None, contact=True,
-                 contact_stiffness=None, solver=None):
+                 contact_stiffness=None, solver=None, contacts=()):
         self.model = model
-        self.sim = Simulator(model, material, contact, contact_stiffness, solver)
+        self.sim = Simulator(model, material, contact, contact_stiffness, solver, contacts)
         dX = model.track_displacements
         K, N = len(model.blendshape_names), len(model.rest_positions)
         if dX is None or np.shape(dX) != (K, N, 3):
@@ -102,7 +102,7 @@ class DrivenSimulation:
         """The DrivenResult at p: the last one when p is unchanged, else a new solve, warm
         from the last one (``start = "last"``) or cold, from rest (``"rest"``). Either way
         the surface is a function of p alone, to the Newton tolerance (the energy is a function
-        of the state and p, sim.collisions).
+        of the state and p, sim.contact).
 
         A warm solve at a p that was solved before and does not converge now is tried again
         from rest: a fit coming back to its accepted point after rejected trials starts from

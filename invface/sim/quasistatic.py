@@ -8,9 +8,9 @@ The unknowns are the free flesh vertices X^U; cranium vertices are fixed at rest
 vertices follow the 6-DOF jaw transform. The steady state zeroes the sum of FVM, collision
 and track forces, i.e. it is a stationary point of the total energy
 
-    E(X) = sum_t V_t Psi(F_t; a) + E_collisions(X; j) + sum_v k_v/2 |x_v - t_v|^2,
+    E(X) = sum_t V_t Psi(F_t; a) + E_contacts(X; j) + sum_v k_v/2 |x_v - t_v|^2,
 
-a C2 function of the state X and the inputs (a, j, t) alone (the contacts of sim.collisions
+a C2 function of the state X and the inputs (a, j, t) alone (the contact models of sim.contact
 are fixed at set-up; Psi's volume barrier makes E infinite for an inverted tet).
 
 Each Newton step solves with the exact Hessian first (DESIGN.md: exact-first took 5
@@ -45,9 +45,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InvfaceError, MeshError, SimulationError
-from ..mesh.tets import face_use, mean_edge_length
+from ..mesh.tets import face_use, mean_edge_length, tet_adjacency
 from . import linsolve
-from .collisions import MIN_CONTACT_RADIUS, Collisions
+from .contact import MIN_CONTACT_RADIUS, ContactSet, default_contacts
 from .fem import Elements, FleshModel, Pattern
 from .materials import Material
 from .tracks import Tracks
@@ -143,8 +143,11 @@ def _check_manifold(tets):
 class Simulator:
     """Quasistatic muscle simulation of a FaceModel's flesh.
 
-    material: Material constants; contact: include collision penalties; contact_stiffness
-    (N/m; default 50 x shear modulus x mean edge length); solver: 'pardiso' | 'superlu' | None.
+    material: Material constants; contact: include the face's contacts (``contact.default_contacts``:
+    lips, lids and bone, eyeballs); contact_stiffness (N/m; default 50 x shear modulus x mean
+    edge length); solver: 'pardiso' | 'superlu' | None; contacts: more contact models
+    (``contact.ContactModel``), added to the face's. ``self.contacts`` is their ContactSet, or
+    None when there are none.
     """
     SHIFTS = (1e-3, 1e-2)       # Levenberg-Marquardt shifts of the exact Hessian (no contacts): in 162
     #                             fallback steps no shift below 1e-3 ever factored, and 1.0 damped every
@@ -153,7 +156,7 @@ class Simulator:
     #                             factorisations in bench/cold_solves.py where 1e-2 alone gave 94
 
     def __init__(self, model, material: Material | None = None, contact=True,
-                 contact_stiffness=None, solver=None):
+                 contact_stiffness=None, solver=None, contacts=()):
         self.model = model
         self.material = material or Material()
         X0 = np.asarray(model.rest_positions, float)
@@ -190,15 +193,16 @@ class Simulator:
 
         self.edge_length = mean_edge_length(X0, tets)
         shear = self.material.shear_modulus
-        self.collisions = None
+        self._adjacency = None
+        models = list(contacts)
         if contact:
             k = contact_stiffness or 50.0 * shear * self.edge_length
             # contacts pair and gate over 1.5 tet edges, but never less than MIN_CONTACT_RADIUS:
             # a gate that narrows with the mesh hands a sliding lip from plane to plane abruptly
-            self.collisions = Collisions(model, ~constrained, k,
-                                         radius=max(1.5 * self.edge_length, MIN_CONTACT_RADIUS))
-        pairs = self.collisions.coupled_pairs() if self.collisions else None
-        self.pattern = Pattern(dof, tets, pairs)
+            models = default_contacts(model, ~constrained, k, max(1.5 * self.edge_length, MIN_CONTACT_RADIUS),
+                                      self.adjacency) + models
+        self.contacts = ContactSet(models, N) if models else None
+        self.pattern = Pattern(dof, tets, self.contacts.coupled_pairs() if self.contacts else None)
         self._solver_name = solver
         self._solver = self.make_solver()                                # symbolic analysis once
         self._factorisations = 0        # factorisations of _solver so far (see SimResult.solve_adjoint)
@@ -239,6 +243,14 @@ class Simulator:
                                    f"range [{lo:g}, {hi:g}]")
         return a
 
+    @property
+    def adjacency(self):
+        """The tet mesh's vertex connectivity (N,N) sparse, nonzero where two vertices share a
+        tet: the contacts' pair filter and the contact-region test use it. Built on first use."""
+        if self._adjacency is None:
+            self._adjacency = tet_adjacency(self.elements.tets, self.N)
+        return self._adjacency
+
     def constrained_positions(self, jaw):
         """Rest positions with the jaw vertices moved by the jaw transform (N,3); jaw (6,)."""
         jaw = _jaw_vector(jaw)
@@ -255,7 +267,7 @@ class Simulator:
         if order == 2 and self._element_work is None:
             self._element_work = np.empty((len(self.elements.tets), 12, 12))
         E, g_nodes, Ke = self.flesh.evaluate(X, act, order, project, self._element_work)      # Ke: order 2 only
-        col = self.collisions
+        col = self.contacts
         if col is not None:
             E += col.energy(X, jm)
         if tracks is not None:
@@ -480,7 +492,7 @@ class Simulator:
         """Newton matrices in the order the fallback tries them, least altered first: (kind,
         Levenberg-Marquardt shift mu) with kind 'exact', 'contacts' (the acting contacts'
         Hessians projected to PSD, the flesh's exact) or 'projected' (every element's)."""
-        if self.collisions is None:
+        if self.contacts is None:
             shifts = [("exact", mu) for mu in self.SHIFTS]
         else:
             shifts = [("contacts", 0.0)] + [("contacts", mu) for mu in self.CONTACT_SHIFTS]
@@ -553,7 +565,7 @@ class Simulator:
 
         ladder = self._ladder()
         first = max(memory[0] - 1, 0)
-        if self.collisions is not None and relative > self.EXACT_BELOW:
+        if self.contacts is not None and relative > self.EXACT_BELOW:
             first = max(first, 1)                   # far from equilibrium: not the exact Hessian
         for rung in range(first, len(ladder)):
             kind, mu = ladder[rung]
@@ -561,7 +573,7 @@ class Simulator:
             if mu:
                 values = values.copy()
                 values[diag] += mu * np.abs(data[diag])
-            if kind == "exact" and self.collisions is not None:
+            if kind == "exact" and self.contacts is not None:
                 t = time.perf_counter()
                 indefinite = self._contact_region_indefinite(X, jm, values)
                 secs["factor"] += time.perf_counter() - t
@@ -590,13 +602,13 @@ class Simulator:
         the region 3.7 % of the DOFs. On the default head the region is 15-25 % of them and a
         test costs 12-17 ms against a factorisation's 40: regions over REGION_FRACTION of the
         DOFs are not tested (False) (bench/RESULTS.md, issue 30)."""
-        verts = self.collisions.acting_vertices(X, jm)
+        verts = self.contacts.acting_vertices(X, jm)
         if len(verts) == 0:
             return False
         region = np.zeros(self.N)
         region[verts] = 1.0
         for _ in range(self.CONTACT_RINGS):
-            region = self.collisions.adjacency @ region
+            region = self.adjacency @ region
         dof = self.dof_of_vertex[region > 0]
         dof = dof[dof >= 0]
         if 3 * len(dof) > self.REGION_FRACTION * self.pattern.n:
@@ -618,7 +630,7 @@ class Simulator:
     def _contact_projection(self, X, jm):
         """Newton matrix data (nnz,) to add to the exact matrix to project each acting
         contact's Hessian to PSD (the flesh's terms stay exact)."""
-        return self.pattern.assemble(None, self.collisions.projection_blocks(X, jm))
+        return self.pattern.assemble(None, self.contacts.projection_blocks(X, jm))
 
     def _line_search(self, X, dx, E, g, act, jm, tracks):
         """Backtracking Armijo on the energy (infinite for an inverted tet, so a step that

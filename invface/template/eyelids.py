@@ -56,7 +56,7 @@ def lid_inner_radii(alpha, beta, r_skin, r_inner):
     """The flesh's inner radii (...) along the rays (alpha, beta) from grid.CENTER, moved out
     to the eyeball where a ray meets it before its tissue depth ends: the lids' inner layer
     lies on the eyeball (``LID_GAP`` outside it, the lid at least ``MIN_LID`` thick) and
-    slides on it (sim.collisions.EyeballContacts) instead of being fixed inside it."""
+    slides on it (sim.contact.EyeballContacts) instead of being fixed inside it."""
     d = grid.directions(alpha, beta)
     out = np.array(r_inner, float)
     for c in eye_centres():

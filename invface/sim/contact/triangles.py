@@ -1,4 +1,4 @@
-"""Collision penalty forces (paper 000 Eq. 3): flesh against flesh (lip on lip, lid on lid)
+"""Triangle penalty contacts (paper 000 Eq. 3): flesh against flesh (lip on lip, lid on lid)
 and flesh against bone (lips and cheeks against the teeth/jaw proxy).
 
 A contact is a free boundary vertex x and a triangle (a, b, c) on the other side, paired once
@@ -11,59 +11,39 @@ vertex at rest. Its energy is
 with n the triangle's unit normal (so the plane moves and turns with the flesh or bone it
 belongs to; jaw triangles move rigidly with the jaw transform), gap_rest the rest gap where
 that is negative (the rest state is contact-free), e the C2 penalty of the penetration
-s = max(-gap, 0)
+(``base.penalty``), and w a C2 bump of r^2 (1 on the normal through the centroid, 0 from
+``radius`` on): each triangle's plane stands for the facing surface only near that triangle,
+and a vertex's triangles hand over to each other smoothly as it slides. One plane per vertex
+extended without a gate makes false contacts (a lip dragged below the upper teeth's edge by
+an open jaw lies far "behind" its planes). The gate measures r in the triangle's plane, not
+in space: a gate of the 3D distance fades the contact as the vertex goes deeper, and lets a
+lip pressed hard behind the teeth through.
 
-    e(s) = 0 (s <= 0),  k s^3 / (6 d) (0 < s < d),  k/2 s^2 - k d/2 s + k d^2/6 (s >= d)
-
-(cubic onset over ``CONTACT_SMOOTHING``), and w a C2 bump of r^2 (1 on the normal through
-the centroid, 0 from ``radius`` on): each triangle's plane stands for the facing surface
-only near that triangle, and a vertex's triangles hand over to each other smoothly as it
-slides. (One plane per vertex extended without a gate made false contacts: lips dragged
-below the upper teeth's edge by a 0.45 rad jaw opening were 6-9 mm "behind" its planes.)
-The gate measures r in the triangle's plane, not in space: a gate of the 3D distance faded
-the contact as the vertex went deeper, and a lower lip pressed 7 mm behind the tooth sheet
-(lipStretch with the jaw at 0.6 rad) was let through.
-
-The total collision energy is therefore a C2 function of the flesh positions and the jaw
+The total contact energy is therefore a C2 function of the flesh positions and the jaw
 parameters alone; its gradient and full Hessian (including the turning of the planes and
 the gate) go into the Newton matrix and the tangent/adjoint solves, so the equilibrium is a
 function of the controls, not of the path of the solve, and its derivatives are the
-derivatives of that function (issue 25: with planes re-found during the solve, cold and
-warm solves of the same controls differed by 0.4 mm at a mouth corner, and the adjoint
-missed finite differences of cold solves by 7-35 %).
+derivatives of that function (planes re-found during a solve would make it depend on the
+path).
 
-The lids slide on the eyeballs through a separate, exact sphere contact (``EyeballContacts``):
-a lid crosses the whole eyeball when the eye closes, farther than a triangle's gate reaches.
+The lids slide on the eyeballs through a separate, exact sphere contact (``eyeballs``): a lid
+crosses the whole eyeball when the eye closes, farther than a triangle's gate reaches.
 
 Limits: a vertex that slides more than about ``radius`` from where it was at rest leaves its
-triangles; the template's bone meshes are open sheets, so a lip dragged past the edge of the
-teeth has no contact there (issue 29 brings teeth).
+triangles; a lip dragged past the edge of a bone mesh has no contact there.
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..mesh.tets import boundary_faces, tet_adjacency
-from ..mesh.triangles import face_normals, group_offsets, vertex_normals
-from .materials import project_psd
+from ...mesh.tets import boundary_faces, tet_adjacency
+from ...mesh.triangles import face_normals, group_offsets, vertex_normals
+from .base import ContactModel, penalty, psd
 
-CONTACT_SMOOTHING = 2e-5     # m: the cubic onset of the contact penalty
-MIN_CONTACT_RADIUS = 0.006   # m: the narrowest pairing radius and gate the simulator uses. 1.5 tet
-#                              edges is 9.1 mm on the default head and 5.8 mm at resolution 4 (a jaw
-#                              opening converges in 12 and 10 Newton iterations); on the meshes refined
-#                              from them (4.5 and 2.9 mm) the opening's residual wandered for 10 and
-#                              more than 14 iterations as lips slid from gate to gate (bench/RESULTS.md)
-
-
-def penalty(gap, k, d=CONTACT_SMOOTHING):
-    """C2 penalty of gaps (c,) with stiffness k (c,): energy e, de/dgap, d2e/dgap2 (each (c,))."""
-    s = np.maximum(-gap, 0.0)
-    cubic = s < d
-    e = np.where(cubic, k * s ** 3 / (6 * d), k * (0.5 * s ** 2 - 0.5 * d * s + d * d / 6))
-    de = -np.where(cubic, k * s ** 2 / (2 * d), k * (s - 0.5 * d))
-    dde = np.where(cubic, k * s / d, k)
-    return e, de, dde
+MIN_CONTACT_RADIUS = 0.006   # m: the narrowest pairing radius and gate the simulator uses: a gate
+#                              that narrows with a refined mesh hands a sliding lip from plane to
+#                              plane abruptly (bench/history has the measurements)
 
 
 def _skew(v):
@@ -201,78 +181,14 @@ def _bone_meshes(model):
     return out
 
 
-def fit_sphere(P):
-    """Least-squares sphere (centre (3,), radius) through points P (n,3):
-    |p|^2 = 2 c.p + (r^2 - |c|^2) solved for c and r."""
-    P = np.asarray(P, float)
-    A = np.concatenate([2 * P, np.ones((len(P), 1))], 1)
-    sol = np.linalg.lstsq(A, np.einsum("ni,ni->n", P, P), rcond=None)[0]
-    c = sol[:3]
-    return c, float(np.sqrt(sol[3] + c @ c))
-
-
-def _eyeballs(model):
-    """[(centre (3,), radius)] of the model's eyeballs (inner parts named eye_*), which ride
-    the cranium: fixed in the simulation's frame."""
-    if model.parts is None:
-        return []
-    return [fit_sphere(model.parts.mesh(n)[0]) for n in model.parts.names if str(n).startswith("eye_")]
-
-
-class EyeballContacts:
-    """The lids sliding on the eyeballs: each free boundary vertex within ``radius`` of an
-    eyeball's surface at rest is kept outside that sphere (centre c, radius R) by the penalty
-    of its gap
-
-        gap = |x - c| - R - gap_rest,   E = e(gap)    (e: ``penalty``, gap_rest = min(rest gap, 0))
-
-    a C2 function of x alone (the sphere is rigid on the cranium), exact for any slide: unlike
-    the triangle contacts, a lid that travels over the whole eyeball never leaves it.
-    Gradient e' n, Hessian e'' n n^T + e'/|x - c| (I - n n^T), n = (x - c)/|x - c|."""
-
-    def __init__(self, X0, cand, spheres, stiffness, radius):
-        vs, cs, rs = [], [], []
-        for c, R in spheres:
-            d = np.linalg.norm(X0[cand] - c, axis=1) - R
-            near = cand[d < radius]
-            vs.append(near)
-            cs.append(np.tile(c, (len(near), 1)))
-            rs.append(np.full(len(near), R))
-        self.v = np.concatenate(vs) if vs else np.zeros(0, np.int64)
-        self.c = np.concatenate(cs) if cs else np.zeros((0, 3))
-        self.R = np.concatenate(rs) if rs else np.zeros(0)
-        self.stiffness = float(stiffness)
-        self.rest_gap = np.zeros(len(self.v))
-        self.rest_gap = np.minimum(self._gap(X0)[0], 0.0)
-
-    def __len__(self):
-        return len(self.v)
-
-    def _gap(self, X):
-        d = np.asarray(X, float)[self.v] - self.c
-        rho = np.linalg.norm(d, axis=1)
-        return rho - self.R - self.rest_gap, d / rho[:, None], rho
-
-    def terms(self, X, order):
-        """(vertex ids (e,), energy (e,), gradient (e,3) if order >= 1, Hessian (e,3,3) if 2)
-        of the acting contacts at positions X (N,3)."""
-        gap, n, rho = self._gap(X)
-        m = gap < 0
-        e, de, dde = penalty(gap[m], self.stiffness)
-        out = [self.v[m], e]
-        if order >= 1:
-            out.append(de[:, None] * n[m])
-        if order >= 2:
-            nn = np.einsum("ci,cj->cij", n[m], n[m])
-            out.append(dde[:, None, None] * nn + (de / rho[m])[:, None, None] * (np.eye(3) - nn))
-        return out
-
-
-class Collisions:
-    """Contact model of a FaceModel's flesh: lips/lids self-contact and flesh against bone.
+class TriangleContacts(ContactModel):
+    """Penalty contacts of a FaceModel's flesh on triangles: lips/lids on each other and flesh
+    against bone and teeth.
 
     free_mask (N,): the simulated vertices; stiffness: penalty stiffness N/m per contact;
-    radius (m): the pairing distance at rest and the width of each contact's gate.
+    radius (m): the pairing distance at rest and the width of each contact's gate; adjacency
+    (N,N) sparse: the tet mesh's vertex connectivity (``mesh.tets.tet_adjacency``), which keeps
+    a vertex from pairing with a triangle of its own tets.
 
     Contacts are fixed at set-up: ``v`` (c,) free boundary vertices, ``tri`` (c,3) triangles
     as ids into the point array Q = (flesh vertices (N), cranium mesh vertices, jaw mesh
@@ -283,7 +199,7 @@ class Collisions:
     bone (or teeth) triangles within ``radius`` facing it within 60 degrees.
     """
 
-    def __init__(self, model, free_mask, stiffness, radius=0.004):
+    def __init__(self, model, free_mask, stiffness, radius=0.004, adjacency=None):
         X0, tets = np.asarray(model.rest_positions, float), model.tets
         N = len(X0)
         self.n_vertices, self.stiffness, self.radius = N, float(stiffness), radius
@@ -294,9 +210,7 @@ class Collisions:
 
         # flesh on flesh
         tri = faces[free_mask[faces].all(1)]
-        #: tet neighbours (N, N) sparse, nonzero where two vertices share a tet (also the
-        #: simulator's contact-region test)
-        self.adjacency = adj = tet_adjacency(tets, N)
+        adj = tet_adjacency(tets, N) if adjacency is None else adjacency
         share = lambda i, f: np.any([np.asarray(adj[cand[i], tri[f, k]]).ravel() > 0 for k in range(3)], 0)
         i, f = _pairs(X0[cand], nrm[cand], X0, tri, radius, -0.5, share)
         vs, tris = [cand[i]], [tri[f]]
@@ -322,7 +236,6 @@ class Collisions:
         q0 = self._q(Q0)
         self.rest_gap = np.minimum(plane_gap(*(q0[:, 3 * i:3 * i + 3] for i in range(4)), order=0), 0.0)
         self.reach = np.tile([0.0, radius], (len(self.v), 1))
-        self.eyes = EyeballContacts(X0, cand, _eyeballs(model), stiffness, radius)
 
     def __len__(self):
         return len(self.v)
@@ -376,7 +289,7 @@ class Collisions:
 
     def energy(self, X, M):
         """Collision energy (J) at positions X (N,3), jaw transform M (4,4)."""
-        return float(self._active(X, M, 0)[1].sum() + self.eyes.terms(X, 0)[1].sum())
+        return float(self._active(X, M, 0)[1].sum())
 
     def gradient(self, X, M):
         """Energy gradient (N,3) (= minus the collision forces)."""
@@ -386,27 +299,24 @@ class Collisions:
         flesh = ids < self.n_vertices
         out = np.zeros((self.n_vertices, 3))
         np.add.at(out, ids[flesh], grad[flesh])
-        v, _, g = self.eyes.terms(X, 1)
-        np.add.at(out, v, g)
         return out
 
     def blocks(self, X, M, project=False):
         """Hessian blocks [(pairs (P,2), B (P,3,3))] of the acting contacts over their flesh
         vertices (each contact's 12x12 Hessian projected to PSD when ``project``)."""
-        return self._blocks(X, M, (lambda H: project_psd(H) if len(H) else H) if project else (lambda H: H))
+        return self._blocks(X, M, psd if project else (lambda H: H))
 
     def acting_vertices(self, X, M):
         """The flesh vertices (sorted ids) of the contacts acting at positions X (N,3), jaw
-        transform M (4,4): each acting contact's vertex and its triangle's flesh vertices, and
-        the vertices pressed against an eyeball."""
+        transform M (4,4): each acting contact's vertex and its triangle's flesh vertices."""
         m = self.acting(X, M)
-        ids = np.concatenate([self.v[m], self.tri[m].ravel(), self.eyes.terms(X, 0)[0]])
+        ids = np.concatenate([self.v[m], self.tri[m].ravel()])
         return np.unique(ids[ids < self.n_vertices])
 
     def projection_blocks(self, X, M):
         """The blocks, as ``blocks``, that projecting each acting contact's Hessian to PSD adds
         to its exact Hessian (each PSD): project_psd(H) - H."""
-        return self._blocks(X, M, lambda H: project_psd(H) - H if len(H) else H)
+        return self._blocks(X, M, lambda H: psd(H) - H)
 
     def _blocks(self, X, M, fix):
         """``blocks`` with each contact's Hessian H (c,n,n) replaced by fix(H)."""
@@ -417,8 +327,7 @@ class Collisions:
         pairs = np.stack([ids[:, a.ravel()], ids[:, b.ravel()]], 2).reshape(-1, 2)
         B = H.reshape(-1, 4, 3, 4, 3).transpose(0, 1, 3, 2, 4).reshape(-1, 3, 3)
         keep = (pairs < self.n_vertices).all(1)
-        v, _, _, He = self.eyes.terms(X, 2)
-        return [(pairs[keep], B[keep]), (np.stack([v, v], 1), fix(He))]
+        return [(pairs[keep], B[keep])]
 
     def jaw_derivative(self, X, M, dM):
         """d(energy gradient)/d(jaw parameter) (P,N,3) for jaw-transform derivatives dM (P,4,4):
