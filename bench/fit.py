@@ -17,7 +17,10 @@ sample plate but the neutral one.
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -34,7 +37,13 @@ def main():
     ap.add_argument("--plates", default="smile_blendshape,smile_simulation",
                     help="sample plates to fit (comma-separated; '' skips plate fits)")
     ap.add_argument("--no-scan", action="store_true", help="skip the scan fits")
+    ap.add_argument("--jacobian", choices=("hybrid", "analytic", "forward"),
+                    help="the dogleg's image Jacobian (default: fit.shading.JACOBIAN)")
+    ap.add_argument("--json", type=Path, help="also write the plate rows to this JSON file")
     a = ap.parse_args()
+    if a.jacobian:
+        from invface.fit import shading
+        shading.JACOBIAN = a.jacobian
     model = invface.FaceModel.load(a.model) if a.model else invface.template.build(resolution=a.resolution)
     vec = FitVector.of(model)
     rng = np.random.default_rng(0)
@@ -43,7 +52,10 @@ def main():
     print(f"head: {len(model.neutral)} vertices, {len(model.tets)} tets, K = {vec.K}")
     if a.plates:
         from invface.fit.samples import SAMPLES
-        plates(model, [n for n in SAMPLES if n != "neutral"] if a.plates == "all" else a.plates.split(","))
+        rows = plates(model, [n for n in SAMPLES if n != "neutral"] if a.plates == "all" else a.plates.split(","))
+        if a.json:
+            a.json.write_text(json.dumps({"command": "python " + " ".join(sys.argv), "jacobian": a.jacobian,
+                                          "plates": rows}, indent=1))
     if a.no_scan:
         return
     print(f"{'model':>11} {'lambda':>7} {'seconds':>8} {'its':>4} {'max |dp|':>9} {'max err mm':>10}")
@@ -74,6 +86,7 @@ def plates(model, names):
     from invface.fit.samples import write_sample_plates
     from invface.render.synthetic import skin_albedo, studio_light
     cal = Calibration(gamma=studio_light(), albedo=skin_albedo(model))
+    rows = []
     print(f"{'plate':>18} {'model':>11} {'curves s':>8} {'shading s':>9} {'total s':>8} "
           f"{'posed mm':>8} {'depth mm':>8} {'plane mm':>8} {'shape mm':>8} {'max mm':>7} {'weights':>7} {'lip vol':>8}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -92,6 +105,11 @@ def plates(model, names):
                       f"{np.median(across) * 1000:8.3f} {np.median(shape) * 1000:8.3f} "
                       f"{shape.max() * 1000:7.2f} {fit.nonzero_weights:7d} "
                       f"{100 * fit.lip_volume_change:+7.2f}%", flush=True)
+                rows.append({"plate": path.stem, "kind": kind, "curves_s": fit.seconds["curves"], "shading_s": sh,
+                             "total_s": fit.seconds["total"], "posed_mm": float(np.median(posed) * 1000),
+                             "depth_mm": float(np.median(depth) * 1000), "plane_mm": float(np.median(across) * 1000),
+                             "shape_mm": float(np.median(shape) * 1000), "lip_volume": fit.lip_volume_change})
+    return rows
 
 
 if __name__ == "__main__":

@@ -129,7 +129,8 @@ def test_huber_rows_make_the_huber_loss_and_bound_an_occluders_pull(small_expres
 
 
 def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_model):
-    """The dogleg's forward-mode image Jacobian: its columns applied to the residual give
+    """The dogleg's forward-mode image Jacobian (jacobian="forward"; the analytic one has its
+    own tests in test_image_jacobian.py): its columns applied to the residual give
     the adjoint gradient of the same render, and their sizes match finite differences of
     the residual (per pixel the sampled silhouettes make differences noisy)."""
     m = small_expressive_model
@@ -137,7 +138,7 @@ def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_m
     P = len(p)
     sm = m.surface_model("blendshape")
     obj = ShadingObjective(m, sm, cam, plate, g, a, np.zeros(P), lam2=0.0, spp=16, silhouette_spp=4,
-                           jacobian_spp=16, robust=None, mask=_eyes_out(m, cam, plate))
+                           jacobian_spp=16, robust=None, mask=_eyes_out(m, cam, plate), jacobian="forward")
     z = np.r_[p * 0.6, ROT, TR]
     _, grad = obj(z)
     xr, Jall = posed_jacobian(sm, z, FitVector.of(m))
@@ -178,7 +179,7 @@ def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_m
     # Huber rows (a threshold most rows here exceed): g = C psi psi', H = C diag(psi'^2) C^T
     from invface.fit.shading import huber_rows
     robust = ShadingObjective(m, sm, cam, plate, g, a, np.zeros(P), lam2=0.0, spp=16, silhouette_spp=4,
-                              jacobian_spp=16, robust=0.01, mask=_eyes_out(m, cam, plate))
+                              jacobian_spp=16, robust=0.01, mask=_eyes_out(m, cam, plate), jacobian="forward")
     psi, dpsi = huber_rows(r, 0.01)
     assert (dpsi < 1).mean() > 0.005
     ne = robust.normal_equations(z)

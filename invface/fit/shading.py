@@ -55,6 +55,7 @@ import numpy as np
 from ..errors import ImageError, InvfaceError, SimulationError
 from ..model.controls import FitVector
 from ..render.backplate import background_plate, head_silhouette
+from ..render.jacobian import RasterJacobian
 from ..render.renderer import FaceRenderer
 from .curves import CurveObjective
 from .lambdas import EQ16_LAMBDA_1, EQ16_LAMBDA_2
@@ -67,6 +68,13 @@ LEVELS = 3
 #: face (0.05), so a fit's own residuals stay quadratic and a hand or a strand of hair in front
 #: of the face pulls with a bounded force
 ROBUST_DELTA = 0.1
+#: the dogleg's image Jacobian (``ShadingObjective.image_jacobian``): 'forward' (Dr.Jit, one
+#: forward-mode pass per control), 'hybrid' (the blendshapes' rows with visibility held fixed,
+#: the jaw's and pose's 12 by forward mode) or 'analytic' (every row with visibility held fixed,
+#: as the paper's OpenDR). On the sample plates the fixed-visibility rows made the dogleg take
+#: more steps and land further from the truth (bench/RESULTS.md), so forward mode stays the default
+JACOBIAN = "forward"
+JACOBIAN_SAMPLES = 1     # rays per pixel along each axis of the analytic Jacobian
 
 
 def _pyr_matrix(n):
@@ -125,6 +133,21 @@ class Pyramid:
             out *= self.scale
         return out
 
+    def columns(self, images):
+        """G of each of m images at once: images (H, W, C, m) -> (m, len(self) * C) float32, row
+        j = G(images[..., j]) (pyrDown takes the C*m channels in one pass)."""
+        import cv2
+        H, W, c, m = images.shape
+        cur = np.ascontiguousarray(images, np.float32).reshape(H, W, c * m)
+        parts = [cur]
+        for _ in self.mats:
+            cur = cv2.pyrDown(cur, borderType=cv2.BORDER_REFLECT_101).reshape(-1, (cur.shape[1] + 1) // 2, c * m)
+            parts.append(cur)
+        out = np.concatenate([np.moveaxis(a.reshape(-1, c, m), 2, 0).reshape(m, -1) for a in parts], 1)
+        if self.scale != 1.0:
+            out *= self.scale
+        return out
+
     def adjoint(self, vec, channels=3):
         """G^T vec: (H, W, channels)."""
         sizes = [h * w * channels for h, w in self.shapes]
@@ -158,12 +181,15 @@ class ShadingObjective:
     px: render and compare only that part of the plate (``face_window``); outside it the
     render shows the plate itself, so the image term there is a constant. levels: the
     pyramid's levels; image_weight: the image rows' weight (a coarse stage's, ``fit_shading``);
-    curve_camera: the camera of the curve term's pixels (default ``camera``)."""
+    curve_camera: the camera of the curve term's pixels (default ``camera``); jacobian:
+    'analytic' or 'forward' (``image_jacobian``; default the module's JACOBIAN, which benches
+    set to compare the two); jacobian_samples: the analytic Jacobian's rays per pixel and axis."""
 
     def __init__(self, model, surface_model, camera, plate, gamma, albedo, p_hat, curves=None,
                  lam1=EQ16_LAMBDA_1, lam2=EQ16_LAMBDA_2, mask=None, spp=8, silhouette_spp=0.5, seed=1, window=None,
                  jacobian_spp=2, backplate=None, robust=ROBUST_DELTA, previous=None, temporal=0.0,
-                 levels=LEVELS, image_weight=1.0, curve_camera=None):
+                 levels=LEVELS, image_weight=1.0, curve_camera=None, jacobian=None,
+                 jacobian_samples=JACOBIAN_SAMPLES):
         import drjit as dr
         self.dr = dr
         self.model, self.sm = model, surface_model
@@ -185,6 +211,11 @@ class ShadingObjective:
                                      parts=model.parts)
         self.p_hat, self.lam1, self.lam2 = np.asarray(p_hat, float), lam1, lam2
         self.jacobian_spp = int(jacobian_spp)
+        jacobian = jacobian or JACOBIAN
+        if jacobian not in ("hybrid", "analytic", "forward"):
+            raise InvfaceError(f"jacobian must be 'hybrid', 'analytic' or 'forward', not {jacobian!r}")
+        self.jacobian = jacobian
+        self.raster = RasterJacobian(self.renderer, jacobian_samples, window) if jacobian != "forward" else None
         self.temporal = temporal_prior(self.vec, previous, temporal)     # a sequence's, or None
         self.robust = None if not robust else float(robust)
         self.curves = CurveObjective(model, surface_model, curve_camera or camera, curves, 0.0) if curves else None
@@ -235,7 +266,7 @@ class ShadingObjective:
         x = mi.Float(xr.astype(np.float32).ravel())
         self.dr.enable_grad(x)
         img = self.renderer.render(x, self.gamma, self.albedo, parts_x=parts_x)
-        rgb = np.array(img, np.float32)[..., :3]
+        rgb = self._rgb = np.array(img, np.float32)[..., :3]
         return x, img, self.G(rgb * self.mask) - self.target
 
     def _backward(self, x, img, r, Jall):
@@ -307,7 +338,7 @@ class ShadingObjective:
         def hessian(free):
             # the image Jacobian's columns only for the variables that can move
             f = np.flatnonzero(free)
-            C = self.image_jacobian(at["xr"], at["J"][f], parts_x=parts_x)
+            C = self.image_jacobian(at["xr"], at["J"][f], parts_x=parts_x, index=f)
             if self.robust is not None:
                 C *= dpsi[None, :].astype(np.float32)
             H = at["Jr"].T @ at["Jr"]
@@ -316,12 +347,47 @@ class ShadingObjective:
 
         return NormalEquations(cost, gradient_fn=gradient, hessian_fn=hessian)
 
-    def image_jacobian(self, xr, Jall, spp=None, parts_x=None):
+    def image_jacobian(self, xr, Jall, spp=None, parts_x=None, index=None):
         """J^T of the image residual r = G M (F - F*): (z size, m) float32, one row per
-        parameter, each a forward-mode pass through one render of the posed surface xr
-        (V, 3) (the inner parts at parts_x (P, 3), fixed) at ``spp`` (default
+        parameter along d xr / dz_k = Jall[k] (V, 3), for the posed surface xr (V, 3) with the
+        inner parts at parts_x (P, 3), fixed. index: the z entries of Jall's rows (default all).
+        jacobian 'analytic': every row by ``analytic_jacobian`` (visibility held fixed, one ray
+        cast for all rows); 'forward': every row by ``forward_jacobian``; 'hybrid': the
+        blendshape weights' rows analytic and the jaw's and the head pose's 12 by forward mode
+        (their image change is mostly the outline's motion, which forward mode samples
+        exactly), so the render passes stay 12 whatever the number of blendshapes."""
+        if self.jacobian == "forward":
+            return self.forward_jacobian(xr, Jall, spp, parts_x)
+        if self.jacobian == "analytic":
+            return self.analytic_jacobian(xr, Jall, parts_x)
+        index = np.arange(len(Jall)) if index is None else np.asarray(index)
+        shapes = index < self.vec.K
+        C = np.empty((len(Jall), len(self.target)), np.float32)
+        if shapes.any():
+            C[shapes] = self.analytic_jacobian(xr, Jall[shapes], parts_x)
+        if (~shapes).any():
+            C[~shapes] = self.forward_jacobian(xr, Jall[~shapes], spp, parts_x)
+        return C
+
+    def analytic_jacobian(self, xr, Jall, parts_x=None):
+        """``image_jacobian`` with visibility held fixed (``render.jacobian``): one ray cast
+        linearises the image at xr, and every row is products with its sparse barycentric
+        matrix; at silhouettes and occlusion edges, the last render's image gradient times the
+        skin's motion on the screen (OpenDR's boundary derivative; the gradient's backward pass
+        keeps the exact silhouette term of the render)."""
+        lin = self.raster.linearise(xr, self.gamma, self.albedo, parts_x=parts_x, image=self._rgb)
+        C = np.empty((len(Jall), len(self.target)), np.float32)
+
+        def rows(k0, block):
+            C[k0:k0 + block.shape[-1]] = self.G.columns(block * self.mask[..., None])
+        lin.columns(Jall, rows)
+        return C
+
+    def forward_jacobian(self, xr, Jall, spp=None, parts_x=None):
+        """``image_jacobian`` by Dr.Jit: one forward-mode pass per row through one render of the
+        posed surface xr (V, 3) (the inner parts at parts_x (P, 3), fixed) at ``spp`` (default
         ``jacobian_spp``) samples per pixel, seeded as the objective's renders, along
-        d xr / dz_k = Jall[k] (V, 3)."""
+        d xr / dz_k = Jall[k] (V, 3); silhouettes included."""
         dr, mi = self.dr, self.renderer.mi
         C = np.empty((len(Jall), len(self.target)), np.float32)
         with _forward_mode(dr):
@@ -441,7 +507,8 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     from the calibration; curves: the plate curves of Eq. 15 or None; mask (H, W) bool or None:
     the plate pixels of the data term, less the eye openings between the curves' lids
     (``without_eyes``). solver: "dogleg" (the paper's: Gauss-Newton on the
-    image Jacobian from forward-mode passes, ``ShadingObjective.normal_equations``) or
+    image Jacobian, ``ShadingObjective.normal_equations``: analytic with visibility held fixed,
+    or Dr.Jit's forward-mode passes with the render option jacobian="forward") or
     "lbfgs" (the gradient-only path: L-BFGS-B on adjoint gradients, one render and one
     backward pass per evaluation, for parameter counts where K+12 forward passes are too
     many); max_iter: iterations of either; ftol: the dogleg stops after a step that lowers
@@ -451,8 +518,8 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     plate's resolution against the pyramid's lower levels (level 1 of the plate and below,
     their weight raised to the whole pyramid's), a quarter of the pixels to render and
     differentiate. radius: the dogleg's first trust radius in ``FitVector.scales()`` units.
-    ``render`` options go to ``ShadingObjective`` (spp, silhouette_spp, seed,
-    jacobian_spp, backplate: default the plate with the head filled in from its
+    ``render`` options go to ``ShadingObjective`` (spp, silhouette_spp, seed, jacobian,
+    jacobian_samples, jacobian_spp, backplate: default the plate with the head filled in from its
     surroundings). Returns a ShadingFit."""
     from .dogleg import dogleg
     sm, vec = model.surface_model(kind), FitVector.of(model)
