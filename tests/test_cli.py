@@ -167,6 +167,13 @@ def test_fit_plate_on_a_folder_fits_the_frames_and_writes_the_sequence_page(smal
     fits = {f: json.loads((out / f / "blendshape" / "fit.json").read_text()) for f in ("neutral", "smile_blendshape")}
     w = {f: s["weights"]["lipCornerPull_L"] for f, s in fits.items()}
     assert w["smile_blendshape"] > w["neutral"] + 0.2          # the truth: 0.7 and 0
+    from invface.model.arkit import ARKIT_NAMES                 # every fit says it in ARKit too
+    assert all(list(s["arkit"]) == list(ARKIT_NAMES) for s in fits.values())
+    assert fits["smile_blendshape"]["arkit"]["mouthSmileLeft"] == pytest.approx(w["smile_blendshape"], abs=1e-6)
+    from invface.io.livelink import read_livelink_csv      # and as a Live Link Face CSV, a row per frame
+    rows = read_livelink_csv(out / "arkit_blendshape.csv")
+    assert [r["MouthSmileLeft"] for r in rows] == pytest.approx([fits[f]["arkit"]["mouthSmileLeft"]
+                                                                 for f in ("neutral", "smile_blendshape")], abs=1e-6)
     # each frame is compared with its truth file (NAME.truth.json beside the plate)
     assert all(s["truth"]["shape_median_mm"] < 0.5 for s in fits.values()), [s["truth"] for s in fits.values()]
     page = (out / "index.html").read_text()
@@ -233,6 +240,9 @@ def test_fit_plate_writes_the_kinds_that_finish_and_exits_0(small_expressive_mod
     out = capsys.readouterr().out
     assert "smile_blendshape.png simulation: did not finish: Newton did NOT converge" in out
     assert (tmp_path / "out/blendshape/fit.json").is_file() and (tmp_path / "out/index.html").is_file()
+    from invface.io.livelink import read_livelink_csv      # the kind that finished, in ARKit (one row)
+    rows = read_livelink_csv(tmp_path / "out/arkit_blendshape.csv")
+    assert len(rows) == 1 and not (tmp_path / "out/arkit_simulation.csv").exists()
     _failing_simulation(monkeypatch, kinds=("blendshape", "simulation"))
     assert main(["fit-plate", *args, "-o", str(tmp_path / "none")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -30,7 +30,8 @@ def test_fit_vector_packs_names_bounds_and_dicts(small_expressive_model):
     assert np.all(lo[vec.weights] == 0) and np.all(hi[vec.weights] == 1)
     assert hi[vec.jaw][0] == pytest.approx(0.6) and np.all(np.isinf(lo[vec.pose]))
     d = vec.to_dict(z)
-    assert set(d) == {"weights", "jaw", "rotation", "translation"} and len(d["weights"]) == K
+    assert set(d) == {"weights", "jaw", "rotation", "translation", "arkit", "arkit_unsupported"}
+    assert len(d["weights"]) == K and len(d["arkit"]) == 52
     np.testing.assert_allclose(vec.from_dict(d), z, atol=1e-6)                 # to_dict rounds to 1e-6
     c = vec.to_controls(z)
     np.testing.assert_allclose(vec.from_controls(c), z, atol=1e-12)

@@ -10,6 +10,12 @@ has. ``export(path, data)`` picks the writer by the path's suffix; a new format 
 | .npz                        | {name: array}                 | arrays.savez         |
 | .csv                        | (header, rows)                | tables.write_csv     |
 | .html .txt .xml .md         | str                           | atomic.write_text    |
+
+Named formats (``export(path, data, format=NAME)``), for files whose suffix says too little:
+
+| format   | data                                                | writer                          |
+|----------|-----------------------------------------------------|---------------------------------|
+| livelink | {"frames": [...], "arkit_names": [...], "fps": f}   | livelink.write_livelink_csv     |
 """
 from __future__ import annotations
 
@@ -18,12 +24,18 @@ from pathlib import Path
 from ..errors import ConfigError
 
 _TABLE = {}
+_FORMATS = {}
 
 
 def register(suffixes, writer):
     """Make ``writer(path, data, **options)`` the exporter of each suffix (".ext")."""
     for s in ([suffixes] if isinstance(suffixes, str) else suffixes):
         _TABLE[s.lower()] = writer
+
+
+def register_format(name, writer):
+    """Make ``writer(path, data, **options)`` the exporter of the named format."""
+    _FORMATS[name] = writer
 
 
 def suffixes():
@@ -42,10 +54,12 @@ def exporter(path):
     return writer
 
 
-def export(path, data, **options):
-    """Write ``data`` to ``path`` with the exporter of its suffix (see the table above),
-    atomically; returns the Path."""
-    exporter(path)(Path(path), data, **options)
+def export(path, data, format=None, **options):
+    """Write ``data`` to ``path`` with the exporter of its suffix, or of the named ``format``
+    (see the tables above), atomically; returns the Path."""
+    if format is not None and format not in _FORMATS:
+        raise ConfigError(f"{path}: unknown export format '{format}'; use one of " + ", ".join(sorted(_FORMATS)))
+    (_FORMATS[format] if format is not None else exporter(path))(Path(path), data, **options)
     return Path(path)
 
 
@@ -85,3 +99,11 @@ register(".json", _json)
 register(".npz", _npz)
 register(".csv", _csv)
 register((".html", ".txt", ".xml", ".md"), _text)
+
+
+def _livelink(path, data, **_):
+    from .livelink import write_livelink_csv
+    write_livelink_csv(path, data["frames"], data["arkit_names"], data.get("fps", 24.0))
+
+
+register_format("livelink", _livelink)

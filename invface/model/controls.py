@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ControlsError
+from .arkit import arkit_values, translate, unsupported
 
 
 # one unit of each fit-vector entry (``FitVector.scales``): weight, jaw (3 rad, 3 m), head rotation
@@ -31,7 +32,9 @@ class Controls:
     def coerce(cls, w, names=None):
         """Build Controls from None, a Controls, or a dict {name: weight, 'jaw': [...], ...}.
 
-        names: the model's blendshape names; weights for other names are rejected.
+        names: the model's blendshape names; weights under other names are taken by their
+        aliases (ARKit's names, ICT-FaceKit's _L/_R, the built-in head's FACS-style names:
+        ``arkit.translate``), and rejected when they have none.
         """
         if w is None:
             return cls()
@@ -53,12 +56,11 @@ class Controls:
             if not np.all(np.isfinite(v)):
                 raise ControlsError(f"controls '{key}' has non-finite values: {v}")
             setattr(c, key, v)
-        known = set(names or ())
         for k, v in c.weights.items():
-            if names is not None and k not in known:
-                raise ControlsError(f"unknown blendshape '{k}'; the model has: {', '.join(sorted(known)) or 'none'}")
             if not np.isfinite(float(v)):
                 raise ControlsError(f"blendshape weight '{k}' is not finite ({v})")
+        if names is not None and not set(c.weights) <= set(names):
+            c.weights = translate(c.weights, names)          # ARKit, ICT-style or FACS-style aliases
         return c
 
     def weight_vector(self, names):
@@ -183,10 +185,14 @@ class FitVector:
         return dict(zip(self.blendshape_names, np.round(b, digits).tolist()))
 
     def to_dict(self, z):
-        """The named dictionary of ``fit.json``: weights by name, jaw (6), rotation, translation."""
+        """The named dictionary of ``fit.json``: weights by name, jaw (6), rotation (rad) and
+        translation (m) of the head, and the 52 ARKit controls (``arkit.arkit_values``) with the
+        ones this model cannot make (``arkit_unsupported``)."""
         p, rot, tr = self.unpack(z)
         return {"weights": self.weights_dict(p), "jaw": p[self.jaw].tolist(),
-                "rotation": rot.tolist(), "translation": tr.tolist()}
+                "rotation": rot.tolist(), "translation": tr.tolist(),
+                "arkit": arkit_values(self.blendshape_names, p[self.weights], p[self.jaw]),
+                "arkit_unsupported": unsupported(self.blendshape_names)}
 
     def from_dict(self, d, what="controls"):
         """z from a dictionary as ``to_dict`` writes (or a Controls / a ground-truth file's dict);

@@ -30,7 +30,8 @@ def sequence_records(out, kinds):
 
 def curve_rows(records):
     """The animation curves of one kind's frame records: a list of {column: value} with frame,
-    time, name, flagged, weight_*, jaw_*, rotation_*, translation_*, activation_*. A flagged
+    time, name, flagged, weight_*, jaw_*, rotation_*, translation_*, activation_*, arkit_* (the 52
+    ARKit controls, ``model.arkit``). A flagged
     frame's controls are interpolated (linearly in time) from its nearest unflagged neighbours."""
     from ..model.rig import JAW_NAMES
     rows = []
@@ -42,6 +43,7 @@ def curve_rows(records):
         row.update({f"rotation_{a}": v for a, v in zip("xyz", r.get("rotation", []))})
         row.update({f"translation_{a}": v for a, v in zip("xyz", r.get("translation", []))})
         row.update({f"activation_{k}": v for k, v in r.get("activations", {}).items()})
+        row.update({f"arkit_{k}": v for k, v in r.get("arkit", {}).items()})
         rows.append(row)
     good = [i for i, r in enumerate(rows) if not r["flagged"]]
     if good and len(good) < len(rows):
@@ -113,11 +115,33 @@ def write_overlay_video(out, kind, fps=24.0, height=360):
     return path
 
 
+def write_arkit_csv(out, kinds, fps=24.0, single=False):
+    """out/arkit_<kind>.csv per kind: the fit's 52 ARKit controls and head rotation in Live Link
+    Face's CSV layout (``io.livelink``), a row per frame in frame order (one row for a single
+    plate, whose fit.json is out/<kind>/fit.json). Returns the paths written."""
+    from ..io.exporters import export
+    from ..model.arkit import ARKIT_NAMES
+    paths = []
+    for kind in kinds:
+        if single:
+            f = Path(out) / kind / "fit.json"
+            recs = [json.loads(f.read_text())] if f.is_file() else []
+        else:
+            recs = sequence_records(out, [kind])[kind]
+        if not recs:
+            continue
+        frames = [{"frame": r.get("frame", i), "arkit": r.get("arkit", {}), "rotation": r.get("rotation", [0, 0, 0])}
+                  for i, r in enumerate(recs)]
+        paths.append(export(Path(out) / f"arkit_{kind}.csv",
+                            {"frames": frames, "arkit_names": ARKIT_NAMES, "fps": fps or 24.0}, format="livelink"))
+    return paths
+
+
 def write_sequence_outputs(out, kinds, fps=0.0):
-    """The sequence's files from its frames' records: curves.csv/json, one overlay MP4 per
-    kind and the sequence page (index.html). Returns their paths."""
+    """The sequence's files from its frames' records: curves.csv/json, the Live Link Face CSV and
+    an overlay MP4 per kind, and the sequence page (index.html). Returns their paths."""
     from ..report.sequence import write_sequence_report
-    paths = list(write_curves_files(out, kinds))
+    paths = list(write_curves_files(out, kinds)) + write_arkit_csv(out, kinds, fps or 24.0)
     paths += [p for k in kinds if (p := write_overlay_video(out, k, fps or 24.0)) is not None]
     paths.append(write_sequence_report(out))
     return paths

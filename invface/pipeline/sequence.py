@@ -19,7 +19,7 @@ from ..fit.lambdas import EQ16_TEMPORAL, TEMPORAL_LAMBDA
 from .clips import open_clip
 from .distributed import fit_sequence_distributed
 from .frames import fit_frames
-from .outputs import write_sequence_outputs
+from .outputs import write_arkit_csv, write_sequence_outputs
 from .plates import _say, model_kinds
 from .runs import finish_run, run_hash, start_run
 
@@ -60,11 +60,15 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
         finish_run(out)
         if len(clip) > 1:
             paths = write_sequence_outputs(out, kinds, fps=clip.fps)
-            _say(progress, message="animation curves: " + ", ".join(str(p) for p in paths[:2]))
-            if len(paths) > 3:
-                _say(progress, message="overlay video(s) (plate | render | wipe): "
-                                       + ", ".join(str(p) for p in paths[2:-1]))
+            named = lambda test: ", ".join(str(p) for p in paths if test(p.name))
+            _say(progress, message="animation curves: " + named(lambda n: n.startswith("curves.")))
+            _say(progress, message="ARKit curves (Live Link Face CSV): " + named(lambda n: n.startswith("arkit_")))
+            if any(p.suffix == ".mp4" for p in paths):
+                _say(progress, message="overlay video(s) (plate | render | wipe): " + named(lambda n: n.endswith(".mp4")))
             _say(progress, message=f"sequence report: {paths[-1]}")
+        else:
+            for p in write_arkit_csv(out, kinds, clip.fps or 24.0, single=True):
+                _say(progress, message=f"ARKit controls (Live Link Face CSV): {p}")
     return rows
 
 

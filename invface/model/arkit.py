@@ -1,0 +1,149 @@
+"""ARKit's 52 face controls: their names, the map from a model's controls to them, and aliases.
+
+ARKit (Apple's ARFaceAnchor blend shapes, also read and written by Live Link Face, MediaPipe
+and MetaHuman) names 52 controls, each a value in [0, 1]. Left and Right are the actor's own
+(+X in invface's model frame), as in ARKit. ``ARKIT_NAMES`` is in the order of a Live Link
+Face recording.
+
+A model's blendshapes reach ARKit by name:
+- a shape named with an ARKit name is that control;
+- ICT-FaceKit's style, ``mouthSmile_L`` / ``_R``, is ``mouthSmileLeft`` / ``Right``;
+- the built-in head's FACS-style names (``LEGACY``) map to one or two ARKit controls each:
+  ``lipCornerPull_L`` is mouthSmileLeft; ``browDown`` drives browDownLeft and browDownRight
+  (one to two); ``browInnerUp_L`` and ``_R`` together are ARKit's single browInnerUp (two to
+  one: its value is their mean). ``lipsPart`` has no ARKit twin and stays an extra.
+
+The jaw is a bone with 6 DOF (``rig.JAW_NAMES``); four ARKit controls read it, 1.0 being the
+jaw's bound in that direction:
+- jawOpen = jaw_rx / rig.JAW_UPPER[0] (0.6 rad);
+- jawLeft = jaw_tx / 8 mm, jawRight = -jaw_tx / 8 mm (the jaw frame's x, the actor's left);
+- jawForward = jaw_tz / 8 mm (the jaw frame's z, out of the face).
+The jaw's roll and yaw (jaw_ry, jaw_rz) and its vertical slide (jaw_ty) have no ARKit name; they
+stay in fit.json's ``jaw``. The built-in head's blendshape named jawOpen is the soft tissue that
+goes with an open jaw (its jaw pose is the fit's jaw_rx), so ARKit's jawOpen reads the jaw.
+
+Controls the model cannot make (the eyes' gaze, tongueOut and others, on the built-in head) are
+0 in ``arkit_values`` and listed by ``unsupported``.
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from ..errors import ControlsError
+
+ARKIT_NAMES = (
+    "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft", "eyeSquintLeft",
+    "eyeWideLeft", "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight", "eyeLookOutRight", "eyeLookUpRight",
+    "eyeSquintRight", "eyeWideRight", "jawForward", "jawRight", "jawLeft", "jawOpen", "mouthClose",
+    "mouthFunnel", "mouthPucker", "mouthRight", "mouthLeft", "mouthSmileLeft", "mouthSmileRight",
+    "mouthFrownLeft", "mouthFrownRight", "mouthDimpleLeft", "mouthDimpleRight", "mouthStretchLeft",
+    "mouthStretchRight", "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper",
+    "mouthPressLeft", "mouthPressRight", "mouthLowerDownLeft", "mouthLowerDownRight", "mouthUpperUpLeft",
+    "mouthUpperUpRight", "browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft",
+    "browOuterUpRight", "cheekPuff", "cheekSquintLeft", "cheekSquintRight", "noseSneerLeft",
+    "noseSneerRight", "tongueOut",
+)
+JAW_CONTROLS = ("jawOpen", "jawLeft", "jawRight", "jawForward")
+JAW_LATERAL = 0.008      # m: jaw_tx at jawLeft / jawRight 1.0
+JAW_FORWARD = 0.008      # m: jaw_tz at jawForward 1.0
+
+# the built-in head's FACS-style controls and the ARKit controls each one drives
+LEGACY = {
+    "browInnerUp_L": ("browInnerUp",), "browInnerUp_R": ("browInnerUp",),
+    "browOuterUp_L": ("browOuterUpLeft",), "browOuterUp_R": ("browOuterUpRight",),
+    "browDown": ("browDownLeft", "browDownRight"),
+    "cheekRaise": ("cheekSquintLeft", "cheekSquintRight"),
+    "noseWrinkle": ("noseSneerLeft", "noseSneerRight"),
+    "upperLipRaise": ("mouthUpperUpLeft", "mouthUpperUpRight"),
+    "lipCornerPull_L": ("mouthSmileLeft",), "lipCornerPull_R": ("mouthSmileRight",),
+    "dimpler": ("mouthDimpleLeft", "mouthDimpleRight"),
+    "lipCornerDepress_L": ("mouthFrownLeft",), "lipCornerDepress_R": ("mouthFrownRight",),
+    "lowerLipDepress": ("mouthLowerDownLeft", "mouthLowerDownRight"),
+    "chinRaise": ("mouthShrugLower",),
+    "lipPucker": ("mouthPucker",),
+    "lipStretch": ("mouthStretchLeft", "mouthStretchRight"),
+    "lipFunnel": ("mouthFunnel",),
+    "lipPress": ("mouthPressLeft", "mouthPressRight"),
+    "eyeBlink_L": ("eyeBlinkLeft",), "eyeBlink_R": ("eyeBlinkRight",),
+}
+
+
+def arkit_name(name):
+    """The ARKit control a blendshape name means, or None: ARKit's own names, ICT-FaceKit's
+    ``_L`` / ``_R`` style (``mouthSmile_L`` -> mouthSmileLeft, ``browInnerUp_L`` -> browInnerUp)
+    and the built-in head's names with a single twin (``lipCornerPull_L`` -> mouthSmileLeft)."""
+    if name in ARKIT_NAMES:
+        return name
+    twins = LEGACY.get(name)
+    if twins is not None:
+        return twins[0] if len(twins) == 1 else None
+    m = re.fullmatch(r"(\w+?)_([LR])", name)
+    if m:
+        full = m.group(1) + ("Left" if m.group(2) == "L" else "Right")
+        if full in ARKIT_NAMES:
+            return full
+        if m.group(1) in ARKIT_NAMES:             # ICT's browInnerUp_L / _R: one ARKit control
+            return m.group(1)
+    return None
+
+
+def drives(name):
+    """The ARKit controls (tuple) a blendshape name drives; empty for an extra (lipsPart)."""
+    if name in LEGACY:
+        return LEGACY[name]
+    a = arkit_name(name)
+    return () if a is None or a in JAW_CONTROLS else (a,)
+
+
+def arkit_values(names, weights, jaw):
+    """{ARKit name: value in [0, 1]} for all 52, from a model's blendshape names (K,), their
+    weights (K,) and the jaw (6,) (``rig.JAW_NAMES``). Several shapes driving one control
+    (browInnerUp_L and _R) give it their mean."""
+    from .rig import JAW_UPPER
+    total = dict.fromkeys(ARKIT_NAMES, 0.0)
+    count = dict.fromkeys(ARKIT_NAMES, 0)
+    for n, w in zip(names, np.asarray(weights, float)):
+        for a in drives(n):
+            total[a] += float(w)
+            count[a] += 1
+    out = {a: total[a] / count[a] if count[a] else 0.0 for a in ARKIT_NAMES}
+    j = np.asarray(jaw, float)
+    out.update(jawOpen=j[0] / JAW_UPPER[0], jawLeft=j[3] / JAW_LATERAL, jawRight=-j[3] / JAW_LATERAL,
+               jawForward=j[5] / JAW_FORWARD)
+    return {a: round(float(np.clip(v, 0.0, 1.0)), 6) for a, v in out.items()}
+
+
+def unsupported(names):
+    """The ARKit controls (sorted) that no blendshape of ``names`` nor the jaw drives."""
+    driven = {a for n in names for a in drives(n)} | set(JAW_CONTROLS)
+    return sorted(set(ARKIT_NAMES) - driven)
+
+
+def translate(weights, names):
+    """Weights by a model's own blendshape names from weights by any names it answers to:
+    its own, ARKit's, ICT-FaceKit's ``_L`` / ``_R`` and the built-in head's FACS-style ones, in
+    either direction (old fit.json files on an ARKit-named model, ARKit names on the built-in
+    head). A control that two of the given names drive takes their mean; one that drives two
+    (browDown, from browDownLeft and browDownRight) takes the mean of those given. Raises
+    ControlsError naming a name the model does not answer to."""
+    names = list(names)
+    known = set(names)
+    by_arkit = {}
+    for n in names:
+        for a in drives(n):
+            by_arkit.setdefault(a, []).append(n)
+    sums, counts = {}, {}
+    for k, v in weights.items():
+        if k in known:
+            targets = [k]
+        else:
+            targets = sorted({t for a in drives(k) for t in by_arkit.get(a, ())})
+        if not targets:
+            raise ControlsError(f"unknown blendshape '{k}'; the model has: {', '.join(sorted(known)) or 'none'} "
+                                "(ARKit, ICT-style _L/_R and FACS-style names are accepted where they map)")
+        for t in targets:
+            sums[t] = sums.get(t, 0.0) + float(v)
+            counts[t] = counts.get(t, 0) + 1
+    return {t: sums[t] / counts[t] for t in sums}

@@ -1,0 +1,70 @@
+"""ARKit's 52 controls (model.arkit): names, the map from the built-in head's FACS-style controls
+and the jaw, aliases in both directions, and the arkit dict every fit.json carries."""
+import numpy as np
+import pytest
+
+from invface.errors import ControlsError
+from invface.model import FitVector
+from invface.model.arkit import (ARKIT_NAMES, JAW_LATERAL, LEGACY, arkit_name, arkit_values, drives, translate,
+                                 unsupported)
+from invface.model.rig import JAW_UPPER
+
+
+def test_the_52_names():
+    assert len(ARKIT_NAMES) == 52 == len(set(ARKIT_NAMES))
+    assert ARKIT_NAMES[0] == "eyeBlinkLeft" and ARKIT_NAMES[-1] == "tongueOut"    # Live Link Face's order
+    assert all(t in ARKIT_NAMES for twins in LEGACY.values() for t in twins)
+
+
+def test_names_are_read_in_every_style():
+    assert arkit_name("mouthSmileLeft") == "mouthSmileLeft"
+    assert arkit_name("mouthSmile_L") == "mouthSmileLeft" and arkit_name("eyeLookIn_R") == "eyeLookInRight"
+    assert arkit_name("browInnerUp_L") == arkit_name("browInnerUp_R") == "browInnerUp"   # ICT splits it
+    assert arkit_name("lipCornerPull_R") == "mouthSmileRight"
+    assert arkit_name("browDown") is None and drives("browDown") == ("browDownLeft", "browDownRight")
+    assert arkit_name("lipsPart") is None and drives("lipsPart") == ()
+    assert drives("jawOpen") == ()          # ARKit's jawOpen reads the jaw bone, not a shape
+
+
+def test_values_of_the_built_in_heads_controls_and_jaw(small_expressive_model):
+    m = small_expressive_model
+    vec = FitVector.of(m)
+    p = m.parameters({"weights": {"lipCornerPull_L": 0.7, "browInnerUp_L": 0.4, "browDown": 0.5, "lipsPart": 0.9},
+                      "jaw": [0.3, 0.05, 0.0, 0.004, 0.0, -0.002]})
+    a = arkit_values(m.blendshape_names, p[vec.weights], p[vec.jaw])
+    assert list(a) == list(ARKIT_NAMES) and all(0.0 <= v <= 1.0 for v in a.values())
+    assert a["mouthSmileLeft"] == 0.7 and a["mouthSmileRight"] == 0.0
+    assert a["browInnerUp"] == pytest.approx(0.2)                 # the mean of its two halves
+    assert a["browDownLeft"] == a["browDownRight"] == 0.5
+    assert a["jawOpen"] == pytest.approx(0.3 / JAW_UPPER[0]) and a["jawLeft"] == pytest.approx(0.004 / JAW_LATERAL)
+    assert a["jawRight"] == 0.0 and a["jawForward"] == 0.0          # clipped at 0: it moved back
+    missing = unsupported(m.blendshape_names)
+    assert {"tongueOut", "eyeLookInLeft", "mouthRollLower", "cheekPuff"} <= set(missing)
+    assert not {"mouthSmileLeft", "jawOpen", "browInnerUp", "eyeBlinkRight"} & set(missing)
+    d = vec.to_dict(p.tolist() + [0.0] * 6)
+    assert d["arkit"] == a and d["arkit_unsupported"] == missing
+
+
+def test_aliases_in_both_directions(small_expressive_model):
+    m = small_expressive_model
+    assert np.array_equal(m.parameters({"mouthSmileLeft": 0.7, "browInnerUp": 0.4}),
+                          m.parameters({"lipCornerPull_L": 0.7, "browInnerUp_L": 0.4, "browInnerUp_R": 0.4}))
+    assert translate({"browDownLeft": 0.6, "browDownRight": 0.2}, m.blendshape_names) == {"browDown": pytest.approx(0.4)}
+    assert translate({"mouthSmile_L": 0.5}, m.blendshape_names) == {"lipCornerPull_L": 0.5}
+    # an ARKit-named model reads the built-in head's (old fit.json) names
+    ark = list(ARKIT_NAMES)
+    assert translate({"lipCornerPull_R": 0.3, "browDown": 0.5, "browInnerUp_L": 0.2, "browInnerUp_R": 0.4}, ark) == {
+        "mouthSmileRight": 0.3, "browDownLeft": 0.5, "browDownRight": 0.5, "browInnerUp": pytest.approx(0.3)}
+    with pytest.raises(ControlsError, match="unknown blendshape 'smile'.*ARKit"):
+        m.parameters({"smile": 1.0})
+    with pytest.raises(ControlsError, match="unknown blendshape 'jawLeft'"):     # a jaw DOF, not a shape
+        m.parameters({"jawLeft": 1.0})
+
+
+def test_a_sequences_curves_carry_the_arkit_columns():
+    from invface.pipeline.outputs import curve_rows
+    recs = [{"_name": f"f{i}", "frame": i, "time": i / 24, "weights": {"lipCornerPull_L": 0.1 * i},
+             "arkit": {"mouthSmileLeft": 0.1 * i, "jawOpen": 0.2}, "flagged": "x" if i == 1 else ""} for i in range(3)]
+    rows = curve_rows(recs)
+    assert [r["arkit_jawOpen"] for r in rows] == [0.2, 0.2, 0.2]
+    assert rows[1]["arkit_mouthSmileLeft"] == pytest.approx(0.1)     # a flagged frame: from its neighbours
