@@ -16,13 +16,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import SHARED
 import trimesh
 
 import invface
 from invface.io.meshes import read_mesh
 from invface.morph.build import build_model
 
-SCAN = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" / "scans" / "lee_perry_smith.obj"
+SCAN = SHARED / "real" / "scans" / "lee_perry_smith.obj"
 
 
 def main():

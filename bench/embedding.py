@@ -12,24 +12,16 @@ tangent solves.
 from __future__ import annotations
 
 import argparse
-import time
-from pathlib import Path
 
 import numpy as np
+from _common import SHARED, timed
 
 import invface
 from invface.mesh.embedding import MLS, barycentric_matrix, moving_least_squares
 from invface.morph.build import build_model
 from invface.sim.driven import DrivenSimulation
 
-ICT = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit"
-
-
-def timed(f, repeat=5):
-    t = time.perf_counter()
-    for _ in range(repeat):
-        out = f()
-    return out, (time.perf_counter() - t) / repeat
+ICT = SHARED / "ict-facekit"
 
 
 def main():
@@ -45,17 +37,17 @@ def main():
     ds = DrivenSimulation(model)
     p = model.parameters({"weights": {"lipCornerPull_L": 0.6, "jawOpen": 0.5},
                           "jaw": np.array(model.meta["blendshape_jaw"]["jawOpen"]) * 0.5})
-    _, solve = timed(lambda: ds.solve(p, warm=None), 1)
-    dX, tangent = timed(lambda: ds.sensitivity(p).tangent(), 1)
+    _, solve = timed(lambda: ds.solve(p, warm=None))
+    dX, tangent = timed(lambda: ds.sensitivity(p).tangent())
     P, N = dX.shape[:2]
     print(f"actor at resolution {a.resolution:g}: {V} skin vertices, {N} tet vertices, {len(T)} tets; "
           f"P = {P} parameters; one solve {solve:.2f} s, its tangent solves {tangent:.2f} s")
     for name, make in (("barycentric", lambda: barycentric_matrix(T, model.embed_tets, model.embed_weights, len(X0))),
                        ("MLS", lambda: moving_least_squares(*args, correct=False)),
                        ("MLS + nodal correction", lambda: moving_least_squares(*args, correct=True))):
-        W, made = timed(make, 1)
-        _, each = timed(lambda: np.stack([W @ d for d in dX]))
-        _, once = timed(lambda: W @ dX.transpose(1, 0, 2).reshape(N, 3 * P))
+        W, made = timed(make)
+        _, each = timed(lambda: np.stack([W @ d for d in dX]), repeat=5)
+        _, once = timed(lambda: W @ dX.transpose(1, 0, 2).reshape(N, 3 * P), repeat=5)
         print(f"{name:24s} {W.nnz / V:6.1f} weights per skin vertex, made in {made:.2f} s; "
               f"W dX/dp: {each:.3f} s as {P} products, {once:.3f} s as one")
 

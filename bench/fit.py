@@ -17,12 +17,10 @@ sample plate but the neutral one.
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
+from _common import add_json_option, write_json
 
 import invface
 from invface.model.pose import pose_points, unpose_points
@@ -39,7 +37,7 @@ def main():
     ap.add_argument("--no-scan", action="store_true", help="skip the scan fits")
     ap.add_argument("--jacobian", choices=("hybrid", "analytic", "forward"),
                     help="the dogleg's image Jacobian (default: fit.shading.JACOBIAN)")
-    ap.add_argument("--json", type=Path, help="also write the plate rows to this JSON file")
+    add_json_option(ap)
     a = ap.parse_args()
     if a.jacobian:
         from invface.fit import shading
@@ -53,16 +51,14 @@ def main():
     if a.plates:
         from invface.fit.samples import SAMPLES
         rows = plates(model, [n for n in SAMPLES if n != "neutral"] if a.plates == "all" else a.plates.split(","))
-        if a.json:
-            a.json.write_text(json.dumps({"command": "python " + " ".join(sys.argv), "jacobian": a.jacobian,
-                                          "plates": rows}, indent=1))
+        write_json(a.json, {"jacobian": a.jacobian or "default", "plates": rows})
     if a.no_scan:
         return
     print(f"{'model':>11} {'lambda':>7} {'seconds':>8} {'its':>4} {'max |dp|':>9} {'max err mm':>10}")
     for kind in ("blendshape", "simulation"):
         scan = pose_points(model.surface_model(kind).surface(p), rot, tr)
         for lam in (1e-8, 1e-6):
-            model._surface_models.clear()          # cold: no warm start from the scan's solve
+            model.forget_surface_models()          # cold: no warm start from the scan's solve
             t0 = time.perf_counter()
             fit = fit_scan(model, scan, kind=kind, lam=lam)
             sec = time.perf_counter() - t0
@@ -95,7 +91,7 @@ def plates(model, names):
             curves = read_curves(path.with_name(path.stem + ".curves.json"), model)
             truth = read_truth(path.with_name(path.stem + ".truth.json"), model)
             for kind in ("blendshape", "simulation"):
-                model._surface_models.clear()
+                model.forget_surface_models()
                 fit = fit_plate(model, plate, cal, curves, kind=kind)
                 posed, shape = vertex_errors(model, fit, *truth)
                 depth, across = depth_errors(fit.surface, truth[0], plate.camera)

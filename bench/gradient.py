@@ -14,10 +14,10 @@ at lipCornerPull_L 0.3, lipPucker 0.3, browInnerUp_L 0.2, jaw opened 0.05 rad (c
 then the same controls solved warm from other states, against the cold surface.
 """
 import argparse
-import copy
 import time
 
 import numpy as np
+from _common import timed
 
 import invface
 from invface.model import FitVector
@@ -25,12 +25,6 @@ from invface.sim.adjoint import Sensitivity, cold_finite_differences
 from invface.sim.contact import TriangleContacts
 from invface.sim.driven import DrivenSimulation
 from invface.sim.poisson import track_displacements
-
-
-def timed(fn):
-    t = time.perf_counter()
-    out = fn()
-    return out, time.perf_counter() - t
 
 
 def controls(ds):
@@ -109,12 +103,11 @@ def main():
     _, t_jac = timed(S.surface_jacobian)
     print(f"  full Jacobian ({len(p)} controls) {t_jac:.2f} s")
 
-    big = copy.copy(model)
-    big._surface_models = {}
-    big.blendshape_names = model.blendshape_names + [n + "_copy" for n in model.blendshape_names]
-    big.blendshapes = np.concatenate([model.blendshapes, 0.5 * model.blendshapes])
-    big.blendshape_activations = np.concatenate([model.blendshape_activations] * 2)
-    big.track_displacements = np.concatenate([model.track_displacements, 0.5 * model.track_displacements])
+    big = model.replace(
+        blendshape_names=model.blendshape_names + [n + "_copy" for n in model.blendshape_names],
+        blendshapes=np.concatenate([model.blendshapes, 0.5 * model.blendshapes]),
+        blendshape_activations=np.concatenate([model.blendshape_activations] * 2),
+        track_displacements=np.concatenate([model.track_displacements, 0.5 * model.track_displacements]))
     ds2 = DrivenSimulation(big)
     vec = FitVector.of(model)
     p_big = FitVector.of(big).controls_vector(np.r_[p[vec.weights], np.zeros(K)], p[vec.jaw])

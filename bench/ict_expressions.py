@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import SHARED
 
 import invface
 from invface.fit.scan import fit_scan, write_scan_fit
@@ -35,7 +36,7 @@ from invface.mesh.closest import closest_points
 from invface.io.meshes import read_mesh
 from invface.morph.build import build_model
 
-ICT = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit"
+ICT = SHARED / "ict-facekit"
 MOVED = 0.001           # m: scan vertices the expression moves by more than this are measured
 COVERED = 0.002         # m: ... and that lie this close to the neutral model (the part it covers)
 SIMULATION = "jawOpen,mouthSmile_L,mouthPucker,mouthFunnel,browInnerUp_L,eyeBlink_L,mouthFrown_L,cheekPuff_L"

@@ -11,8 +11,8 @@ prints each frame's curve RMS before -> after.
 """
 import argparse
 import time
-from dataclasses import replace
-from pathlib import Path
+
+from _common import SHARED
 
 import invface
 from invface.fit.curves import fit_curves
@@ -20,7 +20,7 @@ from invface.fit.identity import SILHOUETTE_WEIGHT, fit_identity
 from invface.pipeline import find_curves, open_clip
 from invface.pipeline.plates import curve_lambda
 
-VIDEO = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "video" / "single_face.mp4"
+VIDEO = SHARED / "real" / "video" / "single_face.mp4"
 
 
 def main():
@@ -42,7 +42,7 @@ def main():
     idf = fit_identity(m, frames[a.fit_frame].plate.camera, curves[a.fit_frame], f0.p, f0.rotation, f0.translation,
                        length=a.length, silhouette=a.silhouette)
     print(f"{frames[a.fit_frame].name}: {idf.describe()} ({time.perf_counter() - t:.1f} s)")
-    adapted = replace(m, neutral=m.neutral + idf.displacement, _surface_models={}, _embedding=None)
+    adapted = m.replace(neutral=m.neutral + idf.displacement)
     for i, f in enumerate(frames):
         print(f"{f.name}: curve RMS {fit(m, i).rms_px:.2f} -> {fit(adapted, i).rms_px:.2f} px", flush=True)
 

@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import SHARED
 import trimesh
 
 import invface
@@ -35,7 +36,7 @@ from invface.morph.build import build_model
 from invface.sim.contact import TriangleContacts
 from invface.sim.driven import DrivenSimulation
 
-ICT = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit"
+ICT = SHARED / "ict-facekit"
 
 
 def main():

@@ -83,9 +83,9 @@ def main():
             gX = np.random.default_rng(0).normal(size=r.X.shape)
             t = time.perf_counter()
             g = activation_gradient(sim, r, gX)       # CG on the last Newton step's factorisation
-            how = "own factorisation" if r._solver is not None else "no factorisation"
+            how = "own factorisation" if r.factorised else "no factorisation"
             stage(f"adjoint at the {label} ({how}), |dL/da| {np.linalg.norm(g):.3g}", t)
-            if r._solver is None:                     # against the factorisation at the solution
+            if not r.factorised:                      # against the factorisation at the solution
                 t = time.perf_counter()
                 r.solver
                 stage(f"    for comparison: factorisation at the {label}", t)

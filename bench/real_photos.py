@@ -15,9 +15,11 @@ import sys
 import time
 from pathlib import Path
 
+from _common import SHARED
+
 from mouth_rms import npz_region_rms
 
-PHOTOS = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "photos"
+PHOTOS = SHARED / "real" / "photos"
 
 
 def table(out):

@@ -20,13 +20,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import SHARED
 
 import invface
 from invface.errors import InvfaceError
 from invface.io.meshes import read_mesh
 from invface.morph.build import build_model
 
-SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 SCANS = SHARED / "real" / "scans"
 ICT = SHARED / "ict-facekit"
 # our landmark -> ICT-FaceKit's Multi-PIE 68-point index (+X is the actor's left in both)
@@ -76,9 +76,9 @@ def run(name, source, template, expressions, annotated=None):
 def contact_sheet(built, path, size=300):
     """One row per build: the scan with its landmarks and curves, the neutral; front and 3/4."""
     import matplotlib.pyplot as plt
-    from invface.report.morph import GREY, _marked, render_row
+    from invface.report.morph import GREY, marked_meshes, render_row
     from invface.report.preview import scenes
-    rows = [np.concatenate([render_row(_marked(res.aligned, res.target.faces, res.landmarks, res.curves, GREY), size, 8),
+    rows = [np.concatenate([render_row(marked_meshes(res.aligned, res.target.faces, res.landmarks, res.curves, GREY), size, 8),
                             render_row(scenes(model)["skin"], size, 8)], 1)
             for _, model, res in built]
     fig_h = len(rows) * size / 100

@@ -32,6 +32,7 @@ from itertools import combinations
 from pathlib import Path
 
 import numpy as np
+from _common import SHARED
 from scipy.stats import qmc
 
 import invface
@@ -39,7 +40,7 @@ from invface.errors import SimulationError
 from invface.model.rig import JAW_LOWER, JAW_NAMES, JAW_UPPER
 from invface.sim.contact import TriangleContacts
 
-ICT = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit"
+ICT = SHARED / "ict-facekit"
 
 
 def load(name, resolution):

@@ -12,7 +12,8 @@ sequence run's (``invface fit-plate CLIP.mp4 -o DIR`` writes both).
 import argparse
 import functools
 import time
-from pathlib import Path
+
+from _common import SHARED
 
 import invface
 import invface.fit.plate as plate_fit
@@ -20,7 +21,7 @@ from invface.fit.calibrate import Calibration
 from invface.fit.shading import fit_shading
 from invface.pipeline import find_curves, open_clip
 
-VIDEO = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "video" / "single_face.mp4"
+VIDEO = SHARED / "real" / "video" / "single_face.mp4"
 
 
 def main():

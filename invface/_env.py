@@ -33,8 +33,7 @@ def limit_openblas_threads() -> bool:
 
     OpenBLAS's threads busy-wait after each call, and on a machine with few cores they take
     the cores from what runs next: a PARDISO factorisation right after a numpy matrix product
-    took 0.08 s instead of 0.042 s, and replaying three photo fits' simulation solves took
-    11.1-13.5 s instead of 7.8-9.2 s (bench/RESULTS.md). The simulation's own threads are
+    runs at half speed (bench/RESULTS.md has the measurements). The simulation's own threads are
     numba's and MKL's; numpy's products here are small. Sets the variable for libraries
     loaded later (and for Dask workers) and limits the ones loaded already (threadpoolctl).
     Returns whether it limited anything.

@@ -27,19 +27,16 @@ Only the product c * E is observed: scaling a channel's albedo by k and its ligh
 leaves the image unchanged. The gauge is fixed so that the mean albedo of the well-seen
 vertices (coverage at least half the median visible vertex's) equals ``albedo_mean``
 (default: the template's skin albedo), and the light carries the plate's overall brightness
-and colour. Deviation, measured: with the mean over every visible vertex, a real photo (the
-astronaut, another identity, a small face) met the gauge with a few grazing vertices of
-albedo 3-5 where the light nearly vanishes, and the light went to DC (3.0, 3.0, 10.7) with a
-blue albedo median of 0.07; with well-seen vertices (and the unseen pull below) it is
-(3.9, 4.0, 4.0). On the synthetic plate (bench/calibrate.py, errors in the gauge that best
-aligns the irradiance) the two changes moved the irradiance error 0.49 -> 0.58 % and the
-albedo error 1.24 -> 2.04 % at 720x540.
+and colour. Deviation: with the mean over every visible vertex, a real photo meets the gauge
+with a few grazing vertices of huge albedo where the light nearly vanishes, and the light
+turns blue; over the well-seen vertices (and with the unseen pull below) it stays white, at a
+small cost on the synthetic plate (bench/calibrate.py).
 
 Only pixels whose every ray hits the face enter the data term (and, if the plate has a
 mask, only masked pixels); vertices no ray sees are filled in by the smoothness term.
 
 The rigid pose is given, as in the paper (there from tracked features; here from the plate's
-curves or landmarks, issue 6). Refining it here from shading alone was tried: with a free
+curves or landmarks). Refining it here from shading alone was tried: with a free
 per-vertex albedo the misalignment is absorbed by the albedo, and the pose did not converge.
 """
 from __future__ import annotations

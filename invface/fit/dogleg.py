@@ -149,9 +149,8 @@ def dogleg(fun, x0, lower=None, upper=None, max_iter=50, radius=1.0, ftol=1e-10,
     c = 2 (-g.p - actual decrease) / p.H.p (exact for a quadratic, as g is exact), and
     mu the geometric mean of its last value and c (one noisy step does not swing it), falling
     by at most half per step; after a step along which the cost fell at least as fast as its
-    slope said (c <= 0, rho >= 2 for a Gauss-Newton step) mu halves. (Holding mu there, the
-    open-mouth sample plate's simulation stage took 18 Gauss-Newton steps of rho 2.7-5.2, each
-    a third of what the cost allowed; halving, 11 steps to a lower cost.) For an image with edges J^T J is
+    slope said (c <= 0, rho >= 2 for a Gauss-Newton step) mu halves: held there, every step
+    would be a fraction of what the cost allows. For an image with edges J^T J is
     the curvature of sub-pixel motion: for steps of pixels it overestimates it, and plain
     Gauss-Newton steps fell short by half (rho ~ 2 at every step of a plate fit). Unbounded,
     mu swung from 0.3 to its floor 0.05 after such steps, and every third step overshot and

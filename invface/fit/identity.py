@@ -2,8 +2,8 @@
 
 A model built from another face (the template, or an actor scanned once) leaves a fixed gap to
 the person in a clip: lid and lip shapes the controls cannot make, since the blendshapes and
-muscles change an expression, not a face. On a real phone clip the curve RMS sat at 3.0 px on
-every frame, flat over time (bench/RESULTS.md, issue 28). Paper 000 starts from an actor
+muscles change an expression, not a face: on a real clip the curve RMS then sits at one level
+on every frame, flat over time. Paper 000 starts from an actor
 model built from a scan of that actor (paper 001); from video alone, the neutral-looking frame
 the calibration is made on (Eq. 14) stands in for the scan. With that frame's controls and pose
 from Eq. 15 held, the neutral moves by a displacement field d (V,3) m minimising

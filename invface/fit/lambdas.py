@@ -25,17 +25,16 @@ EQ15_TRACK_LAMBDA = 1.0     # curve fit's pose pass (ours, not the paper's): a w
                             # so the pose does not explain the expression
 EQ15_ANCHOR_LAMBDA = 1.0    # curve fit's pose pass (ours): the head translation held near a calibration frame's,
                             # px^2 per mm^2 (``fit.curves.pose_anchor``)
-EQ16_LAMBDA_1 = 1e-2        # shading: weight of the curve term E_1 (px^2); the paper's 1e-4 left it at about 1e-4
-                            # of the image term in our units (linear light, whole pyramid): on a real clip the
-                            # shading stage then moved the lips 1-3 px off the curves without lowering the image
-                            # RMS (bench/RESULTS.md, "Eq. 16's curve weight")
+EQ16_LAMBDA_1 = 1e-2        # shading: weight of the curve term E_1 (px^2); the paper's 1e-4 is negligible
+                            # against the image term in our units (linear light, whole pyramid): the shading
+                            # stage then moves the lips off the curves without lowering the image RMS
+                            # (bench/RESULTS.md)
 EQ16_LAMBDA_2 = 1.0         # shading: pull towards the curve solution w^
 TEMPORAL_LAMBDA = 1.0       # sequences (ours): |z - z_prev|^2 in FitVector.scales() units (0.1 weight,
                             # 0.01 rad, 1 mm) added to Eq. 15, px^2 per unit^2 (scaled with the face)
 EQ16_TEMPORAL = 0.1         # sequences (ours): the temporal term in Eq. 16 at this times its Eq. 15 weight (linear
-                            # light per px^2). Real clip, 24 frames, blendshape kind: jitter 2.86 (0), 1.68 (0.01),
-                            # 0.53 (0.1), 0.33 (1) with curve RMS median 1.33-1.37 px and image RMS 0.043 throughout;
-                            # without it the head's depth jumped frame to frame (bench/RESULTS.md)
+                            # light per px^2): it takes most of the jitter out of a clip without moving its curve
+                            # or image RMS; without it the head's depth jumps frame to frame (bench/RESULTS.md)
 
 SAMPLE_EYE_PX = 224.0       # outer eye-corner distance (px) on the sample plates (720x540, 30 deg)
 

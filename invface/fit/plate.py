@@ -6,8 +6,8 @@ sequence of frames, each warm-started from the previous one.
 
 Stages (``PlateFit.history`` logs each):
 
-1. curves, Eq. 15, always with the blendshape rig: it is only the start w^ of Eq. 16, and on
-   the default head the simulation's curve solve took 62 s against 3 s; with the pose
+1. curves, Eq. 15, always with the blendshape rig: it is only the start w^ of Eq. 16, and the
+   simulation's curve solve costs twenty times the rig's; with the pose
    found first by a tracking pass (``fit_curves``);
 2. shading, Eq. 16, by the dogleg (``fit.shading``) with the blendshape rig;
 3. for ``kind="simulation"``: shading again with the muscle simulation, from stage 2's
@@ -16,8 +16,8 @@ Stages (``PlateFit.history`` logs each):
    Newton solve and for accepted steps its tangents (~2 s on the default head, on top of
    the ~1 s render), the last steps. Its stage stops by the rig's final stage's rule (a step
    that lowers the cost by less than 0.5 %): on a real photo the image term keeps a high
-   floor (the photo is not a render of the model), so at 1 % the simulation stopped after
-   one step, still on the rig's curve answer (bench/RESULTS.md, "The simulation's stop rule").
+   floor (the photo is not a render of the model), so a looser rule stops the simulation
+   after one step, still on the rig's curve answer (bench/RESULTS.md).
 
 The calibration (gamma, albedo) comes from Eq. 14 on a neutral plate of the same actor and
 camera set-up.
@@ -40,10 +40,9 @@ from .shading import fit_shading
 
 
 # the first trust radii (``FitVector.scales()`` units) of the coarse blendshape stage and of
-# the simulation stage: on the five real photos the steps at radius 1, 2 and 4 were all
-# trusted (rho 0.9-1.3) and on the trust boundary; the last stage of the blendshape kind
-# keeps 1 (bench/RESULTS.md, "The simulation stage's first trust radius" and "The coarse
-# stage's first trust radius")
+# the simulation stage: on real photos their first steps are trusted and reach the trust
+# boundary at smaller radii, so a larger first radius saves steps; the last stage of the
+# blendshape kind keeps 1 (bench/RESULTS.md)
 COARSE_RADIUS = 4.0
 SIMULATION_RADIUS = 4.0
 

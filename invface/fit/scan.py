@@ -172,8 +172,8 @@ def fit_scan(model, scan_vertices, scan_faces=None, kind="blendshape", mode="cor
         # every solve cold, from rest: the surface is a function of the controls alone, as
         # the scan's (a warm start from a smile found another lip contact state). Nearest
         # mode keeps warm starts from the last solve: anchoring each round at its start
-        # state made an ICT jawOpen fit 4x slower (175 s against 44 s) for 0.06 mm less
-        # error, and its pairs change every round anyway.
+        # state makes a fit several times slower for a negligible gain, and its pairs change
+        # every round anyway.
         with sm.starting_from("rest") if kind == "simulation" else nullcontext():
             res = dogleg(lambda zz: obj(zz, S), z, lo, hi, max_iter=max_iter, progress=progress)
         z, history, status = res.x, res.history, res.status

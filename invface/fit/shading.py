@@ -41,9 +41,8 @@ so the objective is a deterministic function of z.
 The model's inner parts (teeth, tongue, mouth lining, eyes) are rendered where z's jaw and
 pose put them, so an open mouth on the plate meets a dark mouth and teeth in the render, not
 the plate's background. They carry no derivative: the skin's edges against them do, their own
-motion does not (measured on the test scene: their interior term is 0.1 % of the
-translation column; letting Mitsuba sample their edges gave a column 3x too large, from
-edges hidden behind the skin).
+motion does not (their interior term is negligible, and Mitsuba sampling their edges would
+count edges hidden behind the skin).
 """
 from __future__ import annotations
 

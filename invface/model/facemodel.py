@@ -128,6 +128,16 @@ class FaceModel:
         state["_surface_models"], state["_embedding"] = {}, None
         return state
 
+    def replace(self, **changes) -> "FaceModel":
+        """A copy with the given fields changed (``dataclasses.replace``), its surface models and
+        embedding rebuilt on first use from the new data."""
+        import dataclasses
+        return dataclasses.replace(self, **changes, _surface_models={}, _embedding=None)
+
+    def forget_surface_models(self):
+        """Drop the surface models made so far: the next solve starts cold (benches time it)."""
+        self._surface_models.clear()
+
     def surface_model(self, kind="blendshape"):
         """The model x(p) of ``kind`` (created once per FaceModel): parameter_names,
         surface(p), surface_jacobian(p) (P,V,3) and surface_vjp(p, gx) (P,)."""

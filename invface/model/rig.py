@@ -110,7 +110,7 @@ JAW_NAMES = ["jaw_rx", "jaw_ry", "jaw_rz", "jaw_tx", "jaw_ty", "jaw_tz"]
 # rad of slack for a neutral not quite in occlusion), +-0.15 rad sideways and twist, +-8 mm
 # sideways and forward/back, and down to 8 mm but not up. Closing past occlusion or lifting
 # the jaw drives the lower teeth into the upper ones: no real jaw goes there, and the flesh
-# between the two bones has no equilibrium there (bench/robustness.py, issue 25).
+# between the two bones has no equilibrium there (bench/robustness.py).
 JAW_LOWER = np.array([-0.02, -0.15, -0.15, -0.008, -0.008, -0.008])   # rad, rad, rad, m, m, m
 JAW_UPPER = np.array([0.6, 0.15, 0.15, 0.008, 0.0, 0.008])
 

@@ -1,5 +1,5 @@
 """Crop what is not head from an aligned scan: shoulders, chest, clothing, a stand, the back
-of a bust (issue 27).
+of a bust.
 
 The template covers the face, the forehead and scalp to the crown, the sides of the head to
 the ears and the neck to 2 cm below the chin. A scan's surface far outside that region has

@@ -14,12 +14,11 @@ shape is replaced by its unskinned remainder d_k: T(j_k)(n + d_k) equals the imp
 exactly, and j_k is stored as the shape's paired jaw (meta['blendshape_jaw']), as the
 template's own jawOpen has.
 
-Measured on ICT-FaceKit's jawOpen (bench/jaw_split.py; small template morphed onto its
-neutral): j = 17.5 degrees about the hinge with 8 mm forward and 5.1 mm up (unbounded: 19.2
-degrees, 11 mm forward, 6.7 mm up), and the driven simulation at (jawOpen = 1, j_k) follows
-the imported shape to 2.99 mm mean (offsets up to 42 mm); unsplit (j = 0) Newton does not
-converge. A rigid fit of the chin skin alone gave a jaw with 18 mm of translation
-that the simulation followed less closely.
+Unsplit (j = 0), an imported jaw-opening shape is a soft-tissue offset of centimetres that
+Newton cannot follow; split, the simulation follows the imported shape closely
+(bench/jaw_split.py measures it on ICT-FaceKit's jawOpen). A rigid fit of the chin skin alone
+finds a jaw with more translation than a real jaw has, which the simulation follows less
+closely.
 """
 from __future__ import annotations
 

@@ -159,7 +159,7 @@ def closed_seams(Vt, Ft, TL, Vg, Fg, L, opened=(), tol=1e-7, reach=OPENING_REACH
 
     A scan whose eyes or lips are closed has no rim to map; snapped vertex by vertex, the two
     sides of the slit find different walls of the lip or lid line's groove and the slit tears
-    open (15 mm at the mouth of a bust, issue 27). ``surface.morph_surface`` holds each pair
+    open. ``surface.morph_surface`` holds each pair
     together on the scan instead."""
     b = np.flatnonzero(boundary_vertices(Ft, len(Vt)))
     pairs = np.array(sorted(cKDTree(Vt[b]).query_pairs(tol)), np.int64).reshape(-1, 2)

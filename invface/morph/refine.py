@@ -1,9 +1,8 @@
 """A FaceModel with its flesh mesh refined 1:8 (``refine(model)``): the same face, rig and
-anatomy simulated on eight times the tets (issue 30's paper-scale bench: the res-4
-template's 142k tets become 1.14M, near the paper's 1.47M)."""
+anatomy simulated on eight times the tets (the paper-scale bench: the resolution-4
+template's tets become about a million, the paper's scale)."""
 from __future__ import annotations
 
-from dataclasses import replace
 
 import numpy as np
 
@@ -45,11 +44,10 @@ def refine(model: FaceModel, levels=1, progress=None) -> FaceModel:
         w = np.stack([barycentric(X, tets, cand[:, c], P) for c in range(8)], axis=1)   # (V,8,4)
         best = np.argmax(w.min(axis=2), axis=1)
         # the rest carried over as it is (a new model: no surface models or embedding cached)
-        m = replace(m, rest_positions=X, tets=tets, fixed_cranium=fixed(m.fixed_cranium),
-                    fixed_jaw=fixed(m.fixed_jaw), volume_jaw_weights=vw, muscles=muscles,
-                    embed_tets=cand[np.arange(len(cand)), best], embed_weights=w[np.arange(len(cand)), best],
-                    track_displacements=None, meta={**m.meta, "refined": int(m.meta.get("refined", 0)) + 1},
-                    _surface_models={}, _embedding=None)
+        m = m.replace(rest_positions=X, tets=tets, fixed_cranium=fixed(m.fixed_cranium),
+                      fixed_jaw=fixed(m.fixed_jaw), volume_jaw_weights=vw, muscles=muscles,
+                      embed_tets=cand[np.arange(len(cand)), best], embed_weights=w[np.arange(len(cand)), best],
+                      track_displacements=None, meta={**m.meta, "refined": int(m.meta.get("refined", 0)) + 1})
     if model.track_displacements is not None:
         say("muscle-track precompute on the refined mesh (Poisson solves, Eq. 10-11)")
         m.track_displacements = track_displacements(m)

@@ -1,4 +1,4 @@
-"""Where a scan's scalp is hidden by hair, a crown or a cap (issue 27).
+"""Where a scan's scalp is hidden by hair, a crown or a cap.
 
 Hair, a crown or a cap is no skin: snapped onto, it would become a swollen forehead or a
 tall skull. Once the template's face is fitted to the scan by a similarity (A, t; ``units``),

@@ -1,4 +1,4 @@
-"""A scan's unit and scale, decided by its face, not by its bounding box (issue 27).
+"""A scan's unit and scale, decided by its face, not by its bounding box.
 
 A bounding box measures whatever the scan holds: a bust's shoulders, a crown, a stand, a
 stray piece. The face does not vary so much: adult faces are within about 15 % of each

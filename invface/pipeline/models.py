@@ -61,7 +61,7 @@ class ModelBuild:
             lines.append(f"scan {st.get('unit_summary', 'unit ' + st['unit'])} (x{st['scale']:g} to metres); "
                          f"symmetry error {st['symmetry_error_mm']:.2f} mm; alignment residual "
                          f"{st['alignment_residual_mm']:.2f} mm")
-            f = st.get("face_to_scan_mm")          # bundles built before issue 27 lack it
+            f = st.get("face_to_scan_mm")          # older bundles lack it
             if f:
                 lines.append(f"face skin to scan: median {f['median']:.2f} mm, 95th percentile {f['p95']:.2f} mm, "
                              f"max {f['max']:.2f} mm; {100 * st['snapped_fraction']:.1f}% of the template skin "

@@ -4,9 +4,8 @@ The renderer composites the face over a backplate, so that silhouette derivative
 background. The plate itself is the wrong backplate: at the head's outline it already holds
 the face, so a render at the true pose shows face-over-face where the plate shows
 face-over-background, and the fit shrinks the head (moves it away from the camera) to hide
-the difference. On the sample smile plate the image term was lowest 1-2 mm behind the true
-depth with the plate as backplate, and at the true depth with the true background
-(bench/RESULTS.md, issue 26). ``background_plate`` fills the pixels the head covers from
+the difference: with the plate as backplate the image term is lowest behind the true depth,
+with the true background at it. ``background_plate`` fills the pixels the head covers from
 the background around them.
 """
 from __future__ import annotations

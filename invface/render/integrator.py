@@ -15,8 +15,8 @@ both parts:
 Indirect visibility does not exist in this image model, so ``sppi`` is always 0 (it would
 build a guiding octree on every backward pass).
 
-Measured against Mitsuba's ``prb_projective`` with the mesh as an ``area`` emitter (the
-design in issue 5): see ``bench/render.py`` and ``bench/RESULTS.md``.
+Compared with Mitsuba's ``prb_projective`` with the mesh as an ``area`` emitter by
+``bench/render.py``.
 """
 from __future__ import annotations
 

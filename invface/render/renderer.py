@@ -42,7 +42,7 @@ class FaceRenderer:
     triangles (F, 3) int; camera: ``Camera``; spp: interior samples per pixel (multi-jittered);
     silhouette_spp: silhouette (visibility-gradient) samples per pixel, may be fractional;
     seed: the fixed sample seed (the same inputs give the same image). The defaults (8, 0.5)
-    give < 5 % gradient noise on the controls at 720x540 in < 1 s (bench/RESULTS.md).
+    keep the gradient's noise on the controls small at a plate's size (bench/render.py).
     backplate: an optional linear image (H, W, 3) shown behind the face (the plate itself),
     so that silhouette derivatives see the plate's background rather than black: rays that
     miss the face look the plate up (bilinearly) at their own pixel position.

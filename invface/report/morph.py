@@ -27,7 +27,7 @@ def _dots(points, radius, color):
     return V, F, color
 
 
-def _marked(V, F, landmarks, curves, color):
+def marked_meshes(V, F, landmarks, curves, color):
     """Preview meshes of a surface with its landmarks (red) and curves (blue), either empty."""
     meshes = [(V, F, color)]
     if landmarks:
@@ -52,9 +52,9 @@ def write_morph_preview(model, result, folder, template=None, size=420, spp=12):
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     sc = scenes(model)
-    rows = {"target": _marked(result.aligned, result.target.faces, result.landmarks, result.curves, GREY)}
+    rows = {"target": marked_meshes(result.aligned, result.target.faces, result.landmarks, result.curves, GREY)}
     if template is not None:
-        rows["template"] = _marked(template.neutral, template.triangles, result.template_landmarks,
+        rows["template"] = marked_meshes(template.neutral, template.triangles, result.template_landmarks,
                                    result.template_curves, SKIN)
     rows.update({"morphed_skin": sc["skin"], "muscles": sc["skin_muscles"], "bone": sc["bone"]})
     images = [render_row(meshes, size, spp) for meshes in rows.values()]
@@ -71,6 +71,6 @@ def write_failure_preview(found, folder, size=420, spp=12):
         return None
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    meshes = _marked(found["aligned"], found["target"].faces, found.get("landmarks"), found.get("curves"), GREY)
+    meshes = marked_meshes(found["aligned"], found["target"].faces, found.get("landmarks"), found.get("curves"), GREY)
     path = folder / "failed_build.png"
     return write_display_image(path, render_row(meshes, size, spp))

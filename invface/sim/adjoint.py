@@ -141,7 +141,7 @@ class Sensitivity:
 
 def cold_finite_differences(driven, p, gx, rtol=1e-10):
     """Finite differences (P,) of L(p) = sum(gx * surface(p)) for gx (V,3), every solve from
-    rest (the check of ``surface_vjp`` issue 25 asks for): steps 1e-4 for the weights, 1e-5 rad
+    rest (the check of ``surface_vjp``): steps 1e-4 for the weights, 1e-5 rad
     for the jaw rotations, 1e-6 m for its translations. Central, but one-sided (second order,
     into the box, steps of 1e-5) for a weight at its lower bound 0, where the activations
     have their break (the derivative the adjoint gives there is the one into the box)."""

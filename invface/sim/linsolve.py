@@ -31,8 +31,8 @@ class NotSPD(InvfaceError):
 def _pardiso_function():
     """MKL's pardiso entry point, located once per process: the mkl wheel's runtime library
     by its file list (PYPARDISO_MKL_RT overrides), else pypardiso's own search, which globs
-    the whole prefix (importing pypardiso globs once more): 1.2 s per process on this
-    machine, against 0.01 s (bench/RESULTS.md, issue 30). Raises DependencyError."""
+    the whole prefix (importing pypardiso globs once more), which costs a second per process
+    where the file list costs milliseconds. Raises DependencyError."""
     path = os.environ.get("PYPARDISO_MKL_RT")
     if path is None:
         try:

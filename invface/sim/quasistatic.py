@@ -13,19 +13,18 @@ and track forces, i.e. it is a stationary point of the total energy
 a C2 function of the state X and the inputs (a, j, t) alone (the contact models of sim.contact
 are fixed at set-up; Psi's volume barrier makes E infinite for an inverted tet).
 
-Each Newton step solves with the exact Hessian first (DESIGN.md: exact-first took 5
-iterations where always-projected took 23). When the factorisation fails or the step is not
+Each Newton step solves with the exact Hessian first: near equilibrium it converges in far
+fewer steps than a matrix projected to PSD. When the factorisation fails or the step is not
 a descent direction, it climbs a ladder of altered matrices (``Simulator._ladder``): with
 contacts, the exact Hessian with the acting contacts' 12x12 Hessians projected to PSD (every
 contact's Hessian is indefinite: its plane turns with the triangle), then that matrix with a
 Levenberg-Marquardt shift of its diagonal, then the per-element definiteness-projected
-matrix. A shift large enough to cover the contacts damped every direction (a cold smile 18
--> 14 iterations); near a crushed tet the projected matrix converged linearly where a small
-shift converged in 8 (bench/RESULTS.md, issue 25); a shift above 1e-2 damps every direction,
-and there the projected matrix goes faster. The next step starts one rung below the one
-that worked: a failed factorisation costs as much as one that succeeds, and in ten cold
-solves at real-photo controls 215 of 383 factorisations failed when every step started from
-the exact Hessian (94 of 266 with the memory; bench/RESULTS.md, issue 30). A
+matrix. Projecting only the contacts keeps the flesh's curvature, where a shift large enough
+to cover the contacts would damp every direction; near a crushed tet a small shift converges
+where the projected matrix converges only linearly, and beyond a shift of 1e-2 the projected
+matrix is the faster. The next step starts one rung below the one that worked: a failed
+factorisation costs as much as one that succeeds, and a step rarely succeeds on a rung below
+the last one's. A
 backtracking Armijo line search on E follows (it refuses inverting steps: E is infinite
 there). Once a step has factorised the exact Hessian, the next steps first try conjugate
 gradients on their own exact Hessian preconditioned with that factorisation (inexact Newton
@@ -80,9 +79,9 @@ class SimResult:
     _make_solver: object = field(default=None, repr=False)
     _solver: object = field(default=None, repr=False)
     _newton_factor: tuple = field(default=None, repr=False)
-    ADJOINT_CG_RTOL = 1e-6      # |b - H x| <= this |b|: gradients within 6e-7 (relative) of the factorised
-    #                             solve's on the photo actors, the size of the forward rtol's own effect
-    ADJOINT_CG_ITER = 50        # a back-substitution each: 0.4 s at paper scale, a factorisation 30 s
+    ADJOINT_CG_RTOL = 1e-6      # |b - H x| <= this |b|: the gradient's error is then the size of the
+    #                             forward solve's own tolerance's effect
+    ADJOINT_CG_ITER = 50        # a back-substitution each: still far below a factorisation's cost
 
     @property
     def solver(self):
@@ -99,15 +98,19 @@ class SimResult:
             self._solver = s
         return self._solver
 
+    @property
+    def factorised(self):
+        """Whether this result holds a factorisation of its own (``solver`` made one)."""
+        return self._solver is not None
+
     def solve_adjoint(self, b):
         """x (n,) with H x = b for b (n,) on the free DOFs, H the exact Newton matrix at X.
 
         While the simulator still holds this solve's last factorisation of an exact Hessian
         (``_newton_factor``; a step away from X, or a few when the last steps were inexact
         Newton steps on it), by conjugate gradients with that factorisation as the
-        preconditioner, to |H x - b| <= ADJOINT_CG_RTOL |b|: 4-7 back-substitutions and
-        products with H on the default head, 2-10 on the photo actors, 0.9-1.4 s at paper
-        scale against a factorisation's 30 s (bench/RESULTS.md, issue 30). Otherwise, or
+        preconditioner, to |H x - b| <= ADJOINT_CG_RTOL |b|: a few back-substitutions and
+        products with H, far cheaper than a factorisation of its own. Otherwise, or
         when that does not converge in ADJOINT_CG_ITER iterations or meets non-positive
         curvature, with this result's own factorisation (``solver``, which raises
         SimulationError where H is not positive definite)."""
@@ -149,11 +152,11 @@ class Simulator:
     (``contact.ContactModel``), added to the face's. ``self.contacts`` is their ContactSet, or
     None when there are none.
     """
-    SHIFTS = (1e-3, 1e-2)       # Levenberg-Marquardt shifts of the exact Hessian (no contacts): in 162
-    #                             fallback steps no shift below 1e-3 ever factored, and 1.0 damped every
-    #                             direction (bench/cold_solves.py 213 -> 169 iterations with 1e-2 the last)
-    CONTACT_SHIFTS = (1e-2,)    # ... of the contact-projected one: 1e-3 before it gave 111 failed
-    #                             factorisations in bench/cold_solves.py where 1e-2 alone gave 94
+    SHIFTS = (1e-3, 1e-2)       # Levenberg-Marquardt shifts of the exact Hessian (no contacts): smaller
+    #                             ones do not factor where the exact Hessian fails, larger ones damp every
+    #                             direction (bench/cold_solves.py measures them)
+    CONTACT_SHIFTS = (1e-2,)    # ... of the contact-projected one: a smaller shift first only adds
+    #                             failed factorisations
 
     def __init__(self, model, material: Material | None = None, contact=True,
                  contact_stiffness=None, solver=None, contacts=()):
@@ -177,8 +180,8 @@ class Simulator:
         dof[self.free] = np.arange(len(self.free))
         self.dof_of_vertex = dof
         # the element stiffness matrices (T,12,12) of every assembly, written into one array kept
-        # between assemblies: 1.3 GB at paper scale, where a new one cost 0.1-1.7 s of page
-        # faults per assembly against the kernel's 0.4 s (bench/RESULTS.md, issue 30)
+        # between assemblies: at paper scale a new array per assembly costs more in page faults
+        # than the kernel that fills it
         self._element_work = None
         # the tets on the jaw's constrained vertices: where H_UC meets dX^C/dj (sim.adjoint)
         self.jaw_tets = np.flatnonzero(np.isin(tets, model.fixed_jaw).any(1))
@@ -305,9 +308,8 @@ class Simulator:
         lower in energy than the warm start). Returns a SimResult.
 
         Converged when the free-DOF residual |f| <= rtol * force scale * sqrt(DOFs) (force
-        scale: shear modulus x edge length^2 per DOF), wherever the solve started: measured
-        against the start's residual, a cold solve that began at 3.9e6 N counted 21 N as
-        5.5e-6 (bench/RESULTS.md, issue 25).
+        scale: shear modulus x edge length^2 per DOF), wherever the solve started: a residual
+        measured against the start's would call a cold solve converged far from equilibrium.
 
         Newton goes straight to the target from the warm state (or the jaw-skinned rest
         state). If that fails, the solve follows the straight path from the start's inputs
@@ -511,19 +513,16 @@ class Simulator:
         |H_held| over the upper triangle's entries): conjugate gradients on the exact Hessian preconditioned
         with it, to |H dx + g| <= eta |g| with the forcing term eta = min(CG_RTOL, the
         relative residual), in at most CG_ITER iterations, a back-substitution and a product
-        with H each (an inexact Newton step: a factorisation costs about 13 such iterations on
-        the default head, 100 at paper scale). Beyond the gate contacts have switched and the
-        tries mostly fail: in the default head's cold smile and jaw, 2 of 9 tries beyond 1 %
-        converged, 7 of 8 within; at paper scale the smile made the same 32 factorisations
-        with and without the gate (bench/RESULTS.md, issue 30). Else, or when
+        with H each (an inexact Newton step: a factorisation costs many such iterations, the
+        more the larger the mesh). Beyond the gate contacts have switched and the tries mostly
+        fail, so they are not made. Else, or when
         they do not converge or meet non-positive curvature: the first matrix of ``_ladder``
         that factors and gives a descent direction, starting one rung below the one that
         worked last step (``memory[0]``), and with contacts never at the exact Hessian while
         the relative residual is above EXACT_BELOW: far from equilibrium, while contacts
         switch, the exact Hessian is often not positive definite, and PARDISO finds that out
-        at 80 % of a factorisation's cost (the paper-scale smile: 663 s against 843-895 s, the
-        same 22 iterations; the photo actors' cold solves 76 failed factorisations against
-        94). Nor, with contacts, where its submatrix around the acting contacts is not positive
+        only near the end of a factorisation. Nor, with contacts, where its submatrix around
+        the acting contacts is not positive
         definite (``_contact_region_indefinite``: a proof that its factorisation would fail). A
         shifted matrix is M + mu diag|H| with H the exact Hessian. When none works (a singular
         projected matrix), a scaled gradient step."""
@@ -597,11 +596,9 @@ class Simulator:
         tet neighbours, is not positive definite. It is a principal submatrix, so then neither
         is the whole matrix, and factorising that would fail: the ladder skips the exact
         Hessian without paying for it. Where contacts switch, their unprojected Hessians are
-        what makes the exact Hessian indefinite, near them: at paper scale the test found all
-        3 failed factorisations of the smile's exact Hessian (20-25 s each) in 0.28 s a test,
-        the region 3.7 % of the DOFs. On the default head the region is 15-25 % of them and a
-        test costs 12-17 ms against a factorisation's 40: regions over REGION_FRACTION of the
-        DOFs are not tested (False) (bench/RESULTS.md, issue 30)."""
+        what makes the exact Hessian indefinite, near them. The test pays where the region is
+        a small part of a large mesh; regions over REGION_FRACTION of the DOFs are not tested
+        (False): there a test costs a good part of the factorisation it would spare."""
         verts = self.contacts.acting_vertices(X, jm)
         if len(verts) == 0:
             return False
