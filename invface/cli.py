@@ -241,7 +241,7 @@ def cmd_fit_scan(args):
 
 
 def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False, workers=None, scheduler=None,
-                run=None):
+                run=None, security=None):
     """Fit a clip's frames (``pipeline.sequence.fit_sequence``) with bars, a line per finished
     kind and the report paths; on a Dask cluster with ``workers`` or ``scheduler``. run: more
     keys for run.json (what the calibration was made from)."""
@@ -270,7 +270,7 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
     try:
         rows = fit_sequence(model, clip, cal, out, kinds, curves=curves, progress=bars, on_kind=kind_done,
                             on_frame=frame_done, force=force, keep=False, workers=workers, scheduler=scheduler,
-                            extra=run, **options)
+                            extra=run, security=security, **options)
     finally:
         bars.close()
     distributed = (workers or scheduler) and len(clip) > 1
@@ -316,6 +316,10 @@ def cmd_fit_plate(args):
     for name in ("temporal", "temporal_shading"):
         if getattr(args, name) < 0:
             raise InvfaceError(f"--{name.replace('_', '-')} {getattr(args, name)}: give 0 (off) or a positive weight")
+    security = None
+    if args.scheduler:                 # refused before any work: a plain-TCP address beyond loopback
+        from .pipeline.distributed import scheduler_security
+        security = scheduler_security(args.scheduler, args.tls_ca, args.tls_cert, args.tls_key, args.insecure)
     model = _load_model(args.model, args.resolution)
     clip = open_clip(args.plate, args.frames, args.camera)
     print(clip.describe(), flush=True)
@@ -376,7 +380,7 @@ def cmd_fit_plate(args):
     options = dict(iterations=args.iterations, shading=not args.no_shading, lam_curves=args.curve_lambda,
                    solver=args.solver, temporal=args.temporal, temporal_shading=args.temporal_shading)
     _fit_frames(model, clip, cal, kinds, out, options, curves=args.curves, force=args.restart,
-                workers=args.workers, scheduler=args.scheduler, run=run)
+                workers=args.workers, scheduler=args.scheduler, run=run, security=security)
     return 0
 
 
@@ -514,8 +518,15 @@ def build_parser():
                          f"(linear light per px^2; default {EQ16_TEMPORAL:g}, 0 = curve stage only)")
     fp.add_argument("--workers", type=int, help="fit frames on a local Dask cluster of this many processes "
                                                 "(contiguous chunks, one per worker; default: this process)")
-    fp.add_argument("--scheduler", help="address of a running Dask scheduler (tcp://HOST:8786) to fit on; "
-                                        "its workers must see the output folder")
+    fp.add_argument("--scheduler", help="address of a running Dask scheduler to fit on: tls://HOST:8786 with "
+                                        "--tls-ca/--tls-cert/--tls-key (or Dask's TLS config), or tcp:// on this "
+                                        "machine; its workers must see the output folder")
+    fp.add_argument("--tls-ca", help="with a tls:// --scheduler: the CA certificate (PEM) that signed the cluster's")
+    fp.add_argument("--tls-cert", help="with a tls:// --scheduler: this client's certificate (PEM)")
+    fp.add_argument("--tls-key", help="with a tls:// --scheduler: this client's private key (PEM)")
+    fp.add_argument("--insecure", action="store_true",
+                    help="allow a plain tcp:// --scheduler on another machine (data travels pickled: anyone who "
+                         "can reach the scheduler can run code here; only on a network you trust)")
     fp.add_argument("--calib", help="calibration from 'invface calibrate' (.npz); default: calibrate on the "
                                     "(first) plate itself, posed from its curves, and write DIR/calib.npz")
     fp.add_argument("--curves", help="plate curve file (JSON); default PLATE.curves.json beside the plate, "

@@ -1,7 +1,8 @@
 """Frame-parallel sequence fitting on Dask (``dask.distributed``): no scheduler of our own.
 
     rows = fit_sequence_distributed(model, clip, calibration, out, kinds, workers=2)
-    rows = fit_sequence_distributed(..., scheduler="tcp://10.0.0.5:8786")   # a running cluster
+    rows = fit_sequence_distributed(..., scheduler="tls://10.0.0.5:8786",   # a running cluster
+                                    security=scheduler_security("tls://10.0.0.5:8786", ca, cert, key))
 
 The clip is split into contiguous chunks, one per worker (or ``chunks``); each chunk is one
 task that fits its frames in order, warm-started inside the chunk, exactly as the single-process
@@ -64,29 +65,93 @@ def _finished_frames(out, names, kinds, inputs):
                for name in names)
 
 
-def _client(workers, scheduler):
+CONNECT_TIMEOUT = "20s"       # how long a Client waits for a scheduler to answer
+
+
+def _loopback(host):
+    """Whether a host name or address is this machine's loopback."""
+    import ipaddress
+    if host in ("localhost", ""):
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def scheduler_security(address, tls_ca=None, tls_cert=None, tls_key=None, insecure=False):
+    """Check a Dask scheduler address before anything connects to it, and return the
+    ``distributed.Security`` to connect with (None for plain TCP).
+
+    The model, the calibration and the results travel pickled, so whoever can reach the
+    scheduler, or join it as a worker, can run code in this process. Hence:
+    - ``tls://HOST:PORT`` connects with TLS and mutual authentication: the CA that signed the
+      cluster's certificates and this client's certificate and key (files), or, without them,
+      those of Dask's own configuration (``distributed.comm.tls``);
+    - ``tcp://HOST:PORT`` (or ``HOST:PORT``) only on loopback, unless ``insecure`` (a network
+      the user trusts, said explicitly).
+    Raises InvfaceError naming the option and the fix; connects to nothing."""
+    from urllib.parse import urlsplit
+    scheme, _, rest = address.rpartition("://")
+    scheme = scheme or "tcp"
+    host = urlsplit(f"//{rest}").hostname or ""
+    if scheme == "tls":
+        files = {"--tls-ca": tls_ca, "--tls-cert": tls_cert, "--tls-key": tls_key}
+        given = {k: v for k, v in files.items() if v}
+        for opt, f in given.items():
+            if not Path(f).is_file():
+                raise InvfaceError(f"{opt} {f}: no such file")
+        from distributed import Security
+        if given:
+            if len(given) < 3:
+                missing = ", ".join(k for k in files if k not in given)
+                raise InvfaceError(f"--scheduler {address}: TLS needs --tls-ca, --tls-cert and --tls-key together "
+                                   f"(missing {missing})")
+            return Security(tls_ca_file=str(tls_ca), tls_client_cert=str(tls_cert), tls_client_key=str(tls_key),
+                            require_encryption=True)
+        sec = Security()                                  # Dask's configuration, if it has certificates
+        if not sec.tls_ca_file or not sec.tls_client_cert:
+            raise InvfaceError(f"--scheduler {address}: a TLS scheduler needs certificates: pass --tls-ca, "
+                               "--tls-cert and --tls-key, or set them in Dask's config (distributed.comm.tls)")
+        return sec
+    if scheme != "tcp":
+        raise InvfaceError(f"--scheduler {address}: use tls://HOST:PORT (or tcp:// on this machine), not {scheme}://")
+    if not _loopback(host) and not insecure:
+        raise InvfaceError(f"--scheduler {address}: plain TCP to another machine is refused: the model and the "
+                           "results travel pickled, so anyone who can reach that scheduler or join it as a worker "
+                           "can run code here. Use tls://HOST:PORT with --tls-ca, --tls-cert and --tls-key, or pass "
+                           "--insecure on a network you trust")
+    return None
+
+
+def _client(workers, scheduler, security=None):
+    """(Client, the LocalCluster it owns or None). A local cluster's scheduler, nannies and
+    workers listen on 127.0.0.1 only, with no dashboards."""
     from distributed import Client, LocalCluster
     if scheduler:
         try:
-            return Client(scheduler, timeout="20s"), None
+            return Client(scheduler, timeout=CONNECT_TIMEOUT, security=security), None
         except (OSError, TimeoutError) as e:
             raise InvfaceError(f"--scheduler {scheduler}: no Dask scheduler answers there ({e})") from None
-    cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=":0",
-                           silence_logs=logging.ERROR)
+    cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=None, worker_dashboard_address=None, silence_logs=logging.ERROR)
     return Client(cluster), cluster
 
 
 def fit_sequence_distributed(model, clip, calibration, out, kinds=("blendshape",), inputs="", workers=2,
-                             scheduler=None, chunks=None, overlap=1, progress=None, **options):
+                             scheduler=None, chunks=None, overlap=1, progress=None, security=None, **options):
     """Fit a clip's frames on a Dask cluster: a ``distributed.LocalCluster`` of ``workers``
-    single-threaded processes, or the running cluster at ``scheduler`` (an address). Options
-    as ``frames.fit_frames``. progress receives {"done": frames, "total": frames} as frames
-    finish and {"message": ...} for the passes. Returns the per-frame summaries in order."""
+    single-threaded processes on loopback, or the running cluster at ``scheduler`` (an address,
+    checked by ``scheduler_security`` unless ``security``, a ``distributed.Security``, is given).
+    Options as ``frames.fit_frames``. progress receives {"done": frames, "total": frames} as
+    frames finish and {"message": ...} for the passes. Returns the per-frame summaries in order."""
     from distributed import wait
     kinds = model_kinds(kinds)
     if out is None:
         raise InvfaceError("a distributed run writes its frames to an output folder: give one")
-    client, cluster = _client(workers, scheduler)
+    if scheduler and security is None:
+        security = scheduler_security(scheduler)
+    client, cluster = _client(workers, scheduler, security)
     try:
         n = len(client.scheduler_info().get("workers", {})) or int(workers or 1)
         bounds = chunk_bounds(len(clip), chunks or n)

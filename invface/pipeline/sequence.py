@@ -26,7 +26,7 @@ from .runs import finish_run, run_hash, start_run
 
 def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), curves=None, progress=None,
                  on_kind=None, on_frame=None, force=False, camera=None, select=None, keep=True, workers=None,
-                 scheduler=None, extra=None, **options):
+                 scheduler=None, extra=None, security=None, **options):
     """Fit a plate sequence in order (``fit_frames``). frames: a Clip, a
     video, folder or image path (``open_clip``, with ``select`` "START:STOP[:STEP]" and
     ``camera``), or a list of plate paths; curves: for a single plate only (a sequence takes
@@ -34,7 +34,8 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
     see ``fit_frames``; an out folder with an earlier run's fits is resumed when they were
     made from the same inputs, refused otherwise unless ``force`` (``start_run``); then the
     sequence outputs (``write_sequence_outputs``); ``workers`` or ``scheduler``: on a Dask
-    cluster (``distributed.fit_sequence_distributed``; needs ``out``); ``extra``: more keys for
+    cluster (``distributed.fit_sequence_distributed``; needs ``out``; ``security``: a
+    ``distributed.Security`` for a TLS scheduler); ``extra``: more keys for
     run.json. progress receives the fits' events, {"message": ...} for each step (a resumed
     run, the sequence files written) and, on a cluster, {"done": frames, "total": frames}.
     Returns the per-frame summaries of ``fit_frames``, each with its FrameFit as "fit" when
@@ -52,7 +53,7 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
         _say(progress, message=f"{out}: resuming the run there (same inputs): its finished frames are skipped")
     if (workers or scheduler) and len(clip) > 1:
         rows = fit_sequence_distributed(model, clip, calibration, out, kinds, inputs=inputs, workers=workers or 1,
-                                        scheduler=scheduler, progress=progress, **options)
+                                        scheduler=scheduler, progress=progress, security=security, **options)
     else:
         rows = fit_frames(model, clip, calibration, out, kinds, curves=curves, inputs=inputs, keep=keep,
                           progress=progress, on_kind=on_kind, on_frame=on_frame, **options)
