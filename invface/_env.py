@@ -47,3 +47,34 @@ def limit_openblas_threads() -> bool:
         return True
     ThreadpoolController().select(internal_api="openblas").limit(limits=1)
     return True
+
+
+def debugging():
+    """Whether the user asked for tracebacks and native libraries' log lines (``--debug`` sets
+    INVFACE_DEBUG=1)."""
+    return os.environ.get("INVFACE_DEBUG", "") not in ("", "0")
+
+
+class native_stderr_quiet:
+    """Silence what native code writes to the process's stderr (file descriptor 2) inside the
+    block, unless ``debugging()``: MediaPipe's and TFLite's C++ log lines ("W0000 ...
+    face_landmarker_graph.cc") come from there on every detector run. Python's own
+    ``sys.stderr`` is flushed first; exceptions still propagate."""
+
+    def __enter__(self):
+        import sys
+        self.saved = None
+        if debugging():
+            return self
+        sys.stderr.flush()
+        self.saved, self.null = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+        os.dup2(self.null, 2)
+        return self
+
+    def __exit__(self, *exc):
+        import sys
+        if self.saved is not None:
+            sys.stderr.flush()
+            os.dup2(self.saved, 2)
+            os.close(self.saved)
+            os.close(self.null)

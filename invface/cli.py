@@ -1,8 +1,11 @@
-"""The ``invface`` command line. InvfaceErrors print as one line and exit with status 2."""
+"""The ``invface`` command line. Bad input (InvfaceError, an OS error on a file, OpenCV's refusal,
+memory) prints as one line and exits with status 2; an internal error as one line and status 1
+(``invface --debug`` shows the traceback)."""
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import sys
 import time
@@ -443,6 +446,8 @@ CURVE_LAMBDA_HELP = ("weight regulariser lambda_1 of the curve fit, Eq. 15 (px^2
 def build_parser():
     from .fit.lambdas import EQ13_LAMBDA, EQ16_TEMPORAL, TEMPORAL_LAMBDA
     p = argparse.ArgumentParser(prog="invface", description="Anatomically based, differentiable face capture.")
+    p.add_argument("--debug", action="store_true", help="show tracebacks and native libraries' log lines "
+                                                        "(also INVFACE_DEBUG=1)")
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("build-model", help="build (or inspect) a FaceModel bundle")
     b.add_argument("input", nargs="?", help="an existing bundle to summarise/preview")
@@ -568,13 +573,58 @@ def build_parser():
     return p
 
 
+def _os_error(e):
+    """One line for an OSError: the file it names and what to do."""
+    import errno
+    where = e.filename if e.filename is not None else "a file"
+    fix = {errno.EACCES: "it is not writable (or readable) by you: choose another folder or fix its permissions",
+           errno.EPERM: "the operation is not permitted there: choose another folder",
+           errno.EROFS: "it is on a read-only file system: choose another folder",
+           errno.ENOSPC: "the disk is full: free some space or write elsewhere",
+           errno.EFBIG: "the file would be larger than allowed (disk quota or ulimit -f): write elsewhere",
+           errno.ENOENT: "no such file or folder: check the path",
+           errno.ENOTDIR: "a part of the path is a file, not a folder: check the path",
+           errno.EEXIST: "a file stands where a folder is needed: choose another output path",
+           errno.EISDIR: "it is a folder, not a file: give a file"}.get(e.errno, e.strerror or str(e))
+    return f"{where}: {fix}"
+
+
 def main(argv=None):
+    """Run the CLI: exit 0 on success, 2 with one line naming the input or option and the fix
+    for bad input (InvfaceError, OSError, MemoryError, OpenCV's refusals), 1 with one line for
+    an internal error (a bug; ``--debug`` or INVFACE_DEBUG=1 shows its traceback)."""
     args = build_parser().parse_args(argv)
+    if getattr(args, "debug", False):
+        os.environ["INVFACE_DEBUG"] = "1"
+    from ._env import debugging
     try:
         return args.func(args)
     except InvfaceError as e:
         print(f"invface: error: {e}", file=sys.stderr)
         return 2
+    except OSError as e:
+        if debugging():
+            raise
+        print(f"invface: error: {_os_error(e)}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        if debugging():
+            raise
+        print("invface: error: out of memory: use a smaller --resolution, a smaller image or fewer --workers",
+              file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("invface: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:                                     # noqa: BLE001 - the last line of defence
+        if debugging():
+            raise
+        if type(e).__module__.split(".")[0] == "cv2":                # cv2.error: an input OpenCV refused
+            print(f"invface: error: OpenCV refused the input: {str(e).strip().splitlines()[-1]}", file=sys.stderr)
+            return 2
+        print(f"invface: internal error: {type(e).__name__}: {e} (this is a bug: rerun with --debug, or "
+              "INVFACE_DEBUG=1, for the traceback)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._env import native_stderr_quiet
 from ..errors import InvfaceError
 
 # MediaPipe canonical face-mesh indices, corner to corner; (a, b, t) is the point a + t (b - a)
@@ -114,9 +115,10 @@ def _points(res, size, name):
 def detect_landmarks(image_srgb, name="plate"):
     """(478, 2) px: the detector's landmarks on an sRGB image (H, W, 3) in [0, 1] or uint8;
     pixels in the OpenCV convention (centre of the top-left pixel is (0, 0))."""
-    with _landmarker("IMAGE") as det:
+    with native_stderr_quiet(), _landmarker("IMAGE") as det:
         img, size = _mp_image(image_srgb)
-        return _points(det.detect(img), size, name)
+        found = det.detect(img)
+    return _points(found, size, name)
 
 
 class LandmarkTracker:
@@ -131,12 +133,14 @@ class LandmarkTracker:
 
     def __call__(self, image_srgb, time_s, name="frame"):
         ms = int(round(1000 * float(time_s)))
-        if self._det is None or (self._last is not None and ms <= self._last):
-            self.close()
-            self._det = _landmarker("VIDEO")
-        self._last = ms
-        img, size = _mp_image(image_srgb)
-        return _points(self._det.detect_for_video(img, ms), size, name)
+        with native_stderr_quiet():
+            if self._det is None or (self._last is not None and ms <= self._last):
+                self.close()
+                self._det = _landmarker("VIDEO")
+            self._last = ms
+            img, size = _mp_image(image_srgb)
+            found = self._det.detect_for_video(img, ms)
+        return _points(found, size, name)
 
     def close(self):
         if self._det is not None:

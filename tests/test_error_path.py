@@ -1,0 +1,59 @@
+"""One error path (issue 63 item 1): bad input is one line and exit 2, naming the file or option;
+an internal error is one line and exit 1 pointing to --debug, which shows the traceback; native
+libraries' log lines stay off the terminal unless debugging."""
+import os
+
+import pytest
+
+from invface import cli
+
+
+def test_an_unwritable_output_is_one_line_naming_it(small_model, tmp_path, capsys):
+    bundle = tmp_path / "head.npz"
+    small_model.save(bundle)
+    (tmp_path / "afile").write_text("not a folder")
+    assert cli.main(["build-model", str(bundle), "-o", str(tmp_path / "afile" / "x.npz")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "afile" in err[0] and "a file stands where a folder is needed" in err[0], err
+    assert "Traceback" not in "\n".join(err)
+
+
+def test_an_internal_error_is_exit_1_and_debug_shows_it(monkeypatch, tmp_path, capsys):
+    def broken(args):
+        raise ValueError("a bug")
+    monkeypatch.setattr(cli, "cmd_report", broken)
+    monkeypatch.delenv("INVFACE_DEBUG", raising=False)
+    assert cli.main(["report", str(tmp_path)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "internal error: ValueError: a bug" in err[0] and "--debug" in err[0], err
+    with pytest.raises(ValueError, match="a bug"):
+        cli.main(["--debug", "report", str(tmp_path)])
+    monkeypatch.delenv("INVFACE_DEBUG", raising=False)
+
+
+def test_opencv_and_memory_refusals_are_bad_input(monkeypatch, tmp_path, capsys):
+    import cv2
+
+    def opencv(args):
+        raise cv2.error("OpenCV(4.x) checkerboard.cpp:54: error: (-215:Assertion failed) size > 0 in function 'x'")
+
+    def memory(args):
+        raise MemoryError()
+    monkeypatch.delenv("INVFACE_DEBUG", raising=False)
+    for fn, words in ((opencv, "OpenCV refused the input"), (memory, "out of memory")):
+        monkeypatch.setattr(cli, "cmd_report", fn)
+        assert cli.main(["report", str(tmp_path)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and words in err[0], err
+
+
+def test_native_log_lines_are_silenced_unless_debugging(monkeypatch, capfd):
+    from invface._env import native_stderr_quiet
+    monkeypatch.delenv("INVFACE_DEBUG", raising=False)
+    with native_stderr_quiet():
+        os.write(2, b"W0000 face_landmarker_graph.cc:181] noise\n")
+    assert "noise" not in capfd.readouterr().err
+    monkeypatch.setenv("INVFACE_DEBUG", "1")
+    with native_stderr_quiet():
+        os.write(2, b"W0000 shown when debugging\n")
+    assert "shown when debugging" in capfd.readouterr().err
