@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import statistics
 import sys
@@ -134,6 +135,11 @@ def cmd_simulate(args):
     if args.jaw is not None:
         jaw = [args.jaw, 0, 0, 0, 0, 0]
     weights = _named_values(args.weight, "--weight")
+    if args.output:                    # before the solve: a doomed write costs no minutes
+        from .io.meshes import MESH_EXTS
+        if Path(args.output).suffix.lower() not in MESH_EXTS:
+            raise InvfaceError(f"-o {args.output}: the simulated surface is written as a mesh: give a file ending "
+                               + ", ".join(MESH_EXTS))
     if weights and acts:
         raise InvfaceError("give muscle activations (--activations/--set) or blendshape weights "
                            "(--weight), not both: with weights the activations follow from the tracks")
@@ -312,13 +318,6 @@ def cmd_fit_plate(args):
     from .pipeline.neutral import actor_identity, pick_neutral
     from .pipeline.runs import read_run
     from .report.runs import earlier_fits
-    if args.iterations < 0:
-        raise InvfaceError(f"--iterations {args.iterations}: give 0 or more shape-from-shading iterations")
-    if args.workers is not None and args.workers < 1:
-        raise InvfaceError(f"--workers {args.workers}: give 1 or more worker processes")
-    for name in ("temporal", "temporal_shading"):
-        if getattr(args, name) < 0:
-            raise InvfaceError(f"--{name.replace('_', '-')} {getattr(args, name)}: give 0 (off) or a positive weight")
     security = None
     if args.scheduler:                 # refused before any work: a plain-TCP address beyond loopback
         from .pipeline.distributed import scheduler_security
@@ -443,6 +442,31 @@ CURVE_LAMBDA_HELP = ("weight regulariser lambda_1 of the curve fit, Eq. 15 (px^2
                      "corners, 224 on the sample plates)")
 
 
+def _number(cast, low=None, strict=False, high=None):
+    """An argparse type: a finite number of ``cast`` (int or float) at least ``low`` (above it
+    when ``strict``) and at most ``high``; argparse names the option when it refuses one."""
+    def check(text):
+        try:
+            v = cast(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {'an integer' if cast is int else 'a number'}, not {text!r}")
+        if cast is float and not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"must be a finite number, not {text}")
+        if low is not None and (v <= low if strict else v < low):
+            raise argparse.ArgumentTypeError(f"must be {'>' if strict else '>='} {low:g}, not {text}")
+        if high is not None and v > high:
+            raise argparse.ArgumentTypeError(f"must be <= {high:g}, not {text}")
+        return v
+    return check
+
+
+POSITIVE = _number(float, 0, strict=True)
+NON_NEGATIVE = _number(float, 0)
+FINITE = _number(float)
+COUNT = _number(int, 1)
+NON_NEGATIVE_INT = _number(int, 0)
+
+
 def build_parser():
     from .fit.lambdas import EQ13_LAMBDA, EQ16_TEMPORAL, TEMPORAL_LAMBDA
     p = argparse.ArgumentParser(prog="invface", description="Anatomically based, differentiable face capture.")
@@ -460,7 +484,7 @@ def build_parser():
     b.add_argument("--expressions", choices=["simulate", "copy", "none"], default="simulate",
                    help="without --blendshapes: simulate the template's action units on the new anatomy "
                         "(default), copy the template's shapes, or none")
-    b.add_argument("--resolution", type=float, default=1.0, help="template size factor (1 = ~35k tets)")
+    b.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor (1 = ~35k tets)")
     b.add_argument("--force", action="store_true", help="regenerate instead of using the cache")
     b.add_argument("-o", "--output", help="write the bundle here (.npz)")
     b.add_argument("--preview", metavar="DIR", help="write preview images into DIR")
@@ -468,12 +492,12 @@ def build_parser():
     s = sub.add_parser("simulate", help="pose the model by muscle activations or blendshape-driven tracks "
                                         "(quasistatic simulation)")
     s.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
-    s.add_argument("--resolution", type=float, default=1.0, help="template size factor when no --model")
+    s.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model")
     s.add_argument("--activations", help='JSON file: {"activations": {"zygomaticus_major_L": 0.8, ...}, "jaw": [6]}')
     s.add_argument("--set", action="append", metavar="MUSCLE=A", help="set one activation (repeatable)")
     s.add_argument("--weight", action="append", metavar="SHAPE=W",
                    help="blendshape weight driving the muscle tracks (repeatable; paper 000 Sec. 6)")
-    s.add_argument("--jaw", type=float, help="jaw opening angle (rad) about the hinge")
+    s.add_argument("--jaw", type=FINITE, help="jaw opening angle (rad) about the hinge")
     s.add_argument("-o", "--output", help="write the posed skin mesh (OBJ/PLY)")
     s.add_argument("--preview", help="write a PNG: neutral (top) and posed (bottom), front and 3/4")
     s.set_defaults(func=cmd_simulate)
@@ -482,29 +506,29 @@ def build_parser():
     c.add_argument("--camera", help="JSON camera file (default: PLATE.json beside the plate, else the "
                                     "front view)")
     c.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
-    c.add_argument("--resolution", type=float, default=1.0, help="template size factor when no --model")
-    c.add_argument("--pose", type=float, nargs=6, metavar=("RX", "RY", "RZ", "TX", "TY", "TZ"),
+    c.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model")
+    c.add_argument("--pose", type=FINITE, nargs=6, metavar=("RX", "RY", "RZ", "TX", "TY", "TZ"),
                    help="rigid head pose: Euler XYZ (rad) and translation (m); default identity")
     c.add_argument("--auto-pose", action="store_true",
                    help="pose (and expression) from the plate's curves first, for a plate of unknown pose")
     c.add_argument("--curves", help="plate curve file (JSON) for --auto-pose; default PLATE.curves.json "
                    "beside the plate, else the landmark detector")
-    c.add_argument("--curve-lambda", type=float, help=CURVE_LAMBDA_HELP)
-    c.add_argument("--lam", type=float, help="albedo smoothness weight lambda of Eq. 14 (default: the paper's "
+    c.add_argument("--curve-lambda", type=NON_NEGATIVE, help=CURVE_LAMBDA_HELP)
+    c.add_argument("--lam", type=NON_NEGATIVE, help="albedo smoothness weight lambda of Eq. 14 (default: the paper's "
                                              "2500; with --auto-pose scaled with the face's size like lambda_1)")
-    c.add_argument("--max-iter", type=int, default=30, help="Gauss-Newton iterations at most")
+    c.add_argument("--max-iter", type=COUNT, default=30, help="Gauss-Newton iterations at most")
     c.add_argument("-o", "--output", default="calib.npz", help="calibration file to write (.npz)")
     c.set_defaults(func=cmd_calibrate)
     fs = sub.add_parser("fit-scan", help="fit controls and rigid pose to a 3D scan (Eq. 13)")
     fs.add_argument("scan", help="scan mesh (OBJ/PLY, model frame: +Y up, face along +Z)")
     fs.add_argument("--unit", choices=["m", "cm", "mm"], help="the scan's unit (default: found from its size)")
     fs.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
-    fs.add_argument("--resolution", type=float, default=1.0, help="template size factor when no --model")
+    fs.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model")
     fs.add_argument("--model-kind", choices=["blendshape", "simulation"], default="blendshape")
     fs.add_argument("--mode", choices=["correspondence", "nearest"], default="correspondence",
                     help="correspondence: same topology as the model; nearest: any mesh, point-to-plane")
-    fs.add_argument("--lam", type=float, default=EQ13_LAMBDA, help="weight regulariser lambda of Eq. 13 (paper: 1e-6)")
-    fs.add_argument("--max-iter", type=int, default=50, help="dogleg iterations at most (per round)")
+    fs.add_argument("--lam", type=NON_NEGATIVE, default=EQ13_LAMBDA, help="weight regulariser lambda of Eq. 13 (paper: 1e-6)")
+    fs.add_argument("--max-iter", type=COUNT, default=50, help="dogleg iterations at most (per round)")
     fs.add_argument("-o", "--output", default="reports/fit-scan", help="output folder")
     fs.set_defaults(func=cmd_fit_scan)
     fp = sub.add_parser("fit-plate", help="fit controls and pose to a film plate: curves (Eq. 15), then "
@@ -513,15 +537,15 @@ def build_parser():
                                   "a sequence, each frame warm-started from the one before")
     fp.add_argument("--frames", help="frames of a video or folder to fit: START:STOP[:STEP] (Python slice, "
                                      "e.g. 0:72:2) or one index; default all")
-    fp.add_argument("--neutral-frame", type=int, help="frame index to calibrate on when no --calib (default: the "
+    fp.add_argument("--neutral-frame", type=NON_NEGATIVE_INT, help="frame index to calibrate on when no --calib (default: the "
                                                       "most neutral-looking of 8 frames spread over the selection)")
-    fp.add_argument("--temporal", type=float, default=TEMPORAL_LAMBDA,
+    fp.add_argument("--temporal", type=NON_NEGATIVE, default=TEMPORAL_LAMBDA,
                     help="weight of the temporal term between consecutive frames (px^2 per 0.1 weight, 0.01 rad "
                          f"or 1 mm; scaled with the face like lambda_1; default {TEMPORAL_LAMBDA:g}, 0 = off)")
-    fp.add_argument("--temporal-shading", type=float, default=EQ16_TEMPORAL,
+    fp.add_argument("--temporal-shading", type=NON_NEGATIVE, default=EQ16_TEMPORAL,
                     help="the temporal term's weight in shape from shading (Eq. 16), as a share of --temporal "
                          f"(linear light per px^2; default {EQ16_TEMPORAL:g}, 0 = curve stage only)")
-    fp.add_argument("--workers", type=int, help="fit frames on a local Dask cluster of this many processes "
+    fp.add_argument("--workers", type=COUNT, help="fit frames on a local Dask cluster of this many processes "
                                                 "(contiguous chunks, one per worker; default: this process)")
     fp.add_argument("--scheduler", help="address of a running Dask scheduler to fit on: tls://HOST:8786 with "
                                         "--tls-ca/--tls-cert/--tls-key (or Dask's TLS config), or tcp:// on this "
@@ -538,10 +562,10 @@ def build_parser():
                                      "else the automatic landmark detector")
     fp.add_argument("--camera", help="JSON camera file (default: PLATE.json beside the plate, else the front view)")
     fp.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
-    fp.add_argument("--resolution", type=float, default=1.0, help="template size factor when no --model")
+    fp.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model")
     fp.add_argument("--model-kind", choices=["blendshape", "simulation", "both"], default="blendshape")
-    fp.add_argument("--curve-lambda", type=float, help=CURVE_LAMBDA_HELP)
-    fp.add_argument("--iterations", type=int, default=25, help="shape-from-shading iterations at most")
+    fp.add_argument("--curve-lambda", type=NON_NEGATIVE, help=CURVE_LAMBDA_HELP)
+    fp.add_argument("--iterations", type=NON_NEGATIVE_INT, default=25, help="shape-from-shading iterations at most")
     fp.add_argument("--solver", choices=["dogleg", "lbfgs"], default="dogleg",
                     help="shape-from-shading solver: the paper's dogleg (Gauss-Newton on forward-mode "
                          "image Jacobians) or L-BFGS-B on adjoint gradients (for many controls)")
@@ -563,7 +587,7 @@ def build_parser():
     cc = camsub.add_parser("calibrate", help="intrinsics and distortion from checkerboard images (OpenCV)")
     cc.add_argument("images", nargs="+", help="checkerboard photographs")
     cc.add_argument("--board", default="9x6", help="inner corners COLSxROWS (default 9x6)")
-    cc.add_argument("--square", type=float, default=0.025, help="square size in metres")
+    cc.add_argument("--square", type=POSITIVE, default=0.025, help="square size in metres")
     cc.add_argument("--no-distortion", action="store_true", help="fit K only")
     cc.add_argument("-o", "--output", default="camera.json", help="JSON camera file to write")
     cc.set_defaults(func=cmd_camera_calibrate)
@@ -593,7 +617,10 @@ def main(argv=None):
     """Run the CLI: exit 0 on success, 2 with one line naming the input or option and the fix
     for bad input (InvfaceError, OSError, MemoryError, OpenCV's refusals), 1 with one line for
     an internal error (a bug; ``--debug`` or INVFACE_DEBUG=1 shows its traceback)."""
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as e:            # argparse's refusal (its last line names the option) or --help
+        return e.code if isinstance(e.code, int) else 2
     if getattr(args, "debug", False):
         os.environ["INVFACE_DEBUG"] = "1"
     from ._env import debugging

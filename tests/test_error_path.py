@@ -57,3 +57,26 @@ def test_native_log_lines_are_silenced_unless_debugging(monkeypatch, capfd):
     with native_stderr_quiet():
         os.write(2, b"W0000 shown when debugging\n")
     assert "shown when debugging" in capfd.readouterr().err
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["fit-scan", "scan.ply", "--lam", "-1"], "--lam"),
+    (["fit-scan", "scan.ply", "--max-iter", "0"], "--max-iter"),
+    (["fit-plate", "p.png", "--curve-lambda", "-1"], "--curve-lambda"),
+    (["fit-plate", "p.png", "--resolution", "nan"], "--resolution"),
+    (["fit-plate", "p.png", "--workers", "two"], "--workers"),
+    (["camera", "calibrate", "a.png", "--square", "0"], "--square"),
+    (["calibrate", "p.png", "--max-iter", "-3"], "--max-iter"),
+])
+def test_numeric_options_are_checked_before_any_work(argv, option, capsys):
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert f"argument {option}:" in err[-1] and "Traceback" not in "\n".join(err), err
+
+
+def test_simulate_refuses_an_output_it_cannot_write_before_solving(monkeypatch, capsys):
+    import invface.pipeline
+    monkeypatch.setattr(invface.pipeline, "simulate", lambda *a, **k: pytest.fail("solved before checking -o"))
+    assert cli.main(["simulate", "--set", "zygomaticus_major_L=0.5", "-o", "result"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "-o result" in err[0] and ".obj" in err[0], err
