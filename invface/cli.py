@@ -337,13 +337,14 @@ def cmd_fit_plate(args):
                                    f"({clip.indices[0]}..{clip.indices[-1]})")
             pos = clip.indices.index(args.neutral_frame)
             frame = next(clip.frames(pos, pos + 1))
-            curves, source = find_curves(model, frame.plate, args.curves)
+            curves, source = find_curves(model, frame.plate, args.curves, face=args.face)
         elif len(clip) == 1:
             frame = next(clip.frames())
-            curves, source = find_curves(model, frame.plate, args.curves)
+            curves, source = find_curves(model, frame.plate, args.curves, face=args.face)
         else:
             print("picking the most neutral-looking frame to calibrate on", flush=True)
-            frame, curves, source, pose = pick_neutral(model, clip, lam=args.curve_lambda, progress=_events)
+            frame, curves, source, pose = pick_neutral(model, clip, lam=args.curve_lambda, progress=_events,
+                                                       face=args.face)
     before = {} if args.restart else read_run(out)
     mine = {"identity_from": frame.digest if identity else None}
     if not args.calib:
@@ -381,6 +382,8 @@ def cmd_fit_plate(args):
         run.update(calibrated_on=frame.digest, calibration_frame=frame.name)
     options = dict(iterations=args.iterations, shading=not args.no_shading, lam_curves=args.curve_lambda,
                    solver=args.solver, temporal=args.temporal, temporal_shading=args.temporal_shading)
+    if args.face:
+        options["face"] = args.face
     _fit_frames(model, clip, cal, kinds, out, options, curves=args.curves, force=args.restart,
                 workers=args.workers, scheduler=args.scheduler, run=run, security=security)
     return 0
@@ -560,6 +563,9 @@ def build_parser():
                                     "(first) plate itself, posed from its curves, and write DIR/calib.npz")
     fp.add_argument("--curves", help="plate curve file (JSON); default PLATE.curves.json beside the plate, "
                                      "else the automatic landmark detector")
+    fp.add_argument("--face", type=NON_NEGATIVE_INT, default=0,
+                    help="which face the detector fits when the plate shows several: 0 the first found (the whole "
+                         "frame first, then crops around face proposals, largest first), 1 the next, ...")
     fp.add_argument("--camera", help="JSON camera file (default: PLATE.json beside the plate, else the front view)")
     fp.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
     fp.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model")

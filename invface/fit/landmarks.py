@@ -112,13 +112,105 @@ def _points(res, size, name):
     return np.array([[p.x * w - 0.5, p.y * h - 0.5] for p in res.face_landmarks[0]])
 
 
-def detect_landmarks(image_srgb, name="plate"):
+PROPOSAL_CROP = 384     # px: a proposed face's crop is scaled to this size for the landmarker
+PROPOSAL_MARGIN = 1.0   # the crop reaches this many face widths beyond each side of the proposal
+PROPOSAL_FRAME = 1280   # px: the cascades look at the frame scaled to at most this size
+
+
+def face_proposals(image_srgb):
+    """Face boxes (x, y, width, height) px in an sRGB image, likeliest first: OpenCV's bundled
+    frontal-face Haar cascades over the frame (scaled to at most PROPOSAL_FRAME px, down to 16 px
+    faces there), then tiles: windows of a half, a third and a quarter of the frame's shorter
+    side, overlapping by half, each offered as a box a third of its size at its centre (so its
+    crop is the tile). MediaPipe's detector sees the whole frame at 128 px: a small face in a
+    wide frame needs a crop around such a box."""
+    import cv2
+    img = np.asarray(image_srgb)
+    if img.dtype != np.uint8:
+        img = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+    grey = cv2.equalizeHist(cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_RGB2GRAY))
+    k = min(1.0, PROPOSAL_FRAME / max(grey.shape))
+    if k < 1:
+        grey = cv2.resize(grey, (round(grey.shape[1] * k), round(grey.shape[0] * k)), interpolation=cv2.INTER_AREA)
+    boxes = []
+    for name in ("haarcascade_frontalface_alt2.xml", "haarcascade_frontalface_default.xml"):
+        cascade = cv2.CascadeClassifier(cv2.data.haarcascades + name)
+        found = cascade.detectMultiScale(grey, scaleFactor=1.1, minNeighbors=3, minSize=(16, 16))
+        boxes += sorted((tuple(int(round(v / k)) for v in b) for b in (found if len(found) else [])),
+                        key=lambda b: -b[2] * b[3])
+    kept = []
+    for b in boxes:
+        if all(_iou(b, q) <= 0.3 for q in kept):
+            kept.append(b)
+    H, W = img.shape[:2]
+    for div in (2, 3, 4):
+        side = min(H, W) // div
+        if side < 96:
+            break
+        step = side // 2
+        for y in range(0, max(H - side, 0) + 1, step):
+            for x in range(0, max(W - side, 0) + 1, step):
+                kept.append((x + side // 3, y + side // 3, side // 3, side // 3))
+    return kept
+
+
+def _iou(a, b):
+    x0, y0 = max(a[0], b[0]), max(a[1], b[1])
+    x1, y1 = min(a[0] + a[2], b[0] + b[2]), min(a[1] + a[3], b[1] + b[3])
+    inter = max(x1 - x0, 0) * max(y1 - y0, 0)
+    return inter / float(a[2] * a[3] + b[2] * b[3] - inter)
+
+
+def _in_crop(det, image, box):
+    """The landmarker's points (478, 2) in the full image's pixels, detected on a crop around
+    box scaled to PROPOSAL_CROP px, or None when it finds no face there."""
+    import cv2
+    x, y, w, h = box
+    side = int(max(w, h) * (1 + 2 * PROPOSAL_MARGIN))
+    cx, cy = x + w / 2, y + h / 2
+    x0, y0 = int(round(cx - side / 2)), int(round(cy - side / 2))
+    H, W = image.shape[:2]
+    pad = [(max(-y0, 0), max(y0 + side - H, 0)), (max(-x0, 0), max(x0 + side - W, 0)), (0, 0)]
+    crop = np.pad(image[max(y0, 0):y0 + side, max(x0, 0):x0 + side, :3], pad, mode="edge")
+    scale = PROPOSAL_CROP / side
+    crop = cv2.resize(crop, (PROPOSAL_CROP, PROPOSAL_CROP), interpolation=cv2.INTER_CUBIC if scale > 1 else cv2.INTER_AREA)
+    img, size = _mp_image(crop)
+    res = det.detect(img)
+    if not res.face_landmarks:
+        return None
+    pts = _points(res, size, "crop")
+    return np.stack([x0 + (pts[:, 0] + 0.5) / scale - 0.5, y0 + (pts[:, 1] + 0.5) / scale - 0.5], 1)
+
+
+def detect_landmarks(image_srgb, name="plate", face=0):
     """(478, 2) px: the detector's landmarks on an sRGB image (H, W, 3) in [0, 1] or uint8;
-    pixels in the OpenCV convention (centre of the top-left pixel is (0, 0))."""
+    pixels in the OpenCV convention (centre of the top-left pixel is (0, 0)).
+
+    The whole frame is tried first. Where it finds no face, or ``face`` asks for another than
+    the first, each ``face_proposals`` box is tried on a crop around it, and the faces found
+    there, largest first, are numbered from 0: ``face`` picks one."""
+    img = np.asarray(image_srgb)
+    if img.dtype != np.uint8:
+        img = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
     with native_stderr_quiet(), _landmarker("IMAGE") as det:
-        img, size = _mp_image(image_srgb)
-        found = det.detect(img)
-    return _points(found, size, name)
+        if face == 0:
+            mp_img, size = _mp_image(img)
+            found = det.detect(mp_img)
+            if found.face_landmarks:
+                return _points(found, size, name)
+        proposals = face_proposals(img)
+        faces = []
+        for box in proposals:
+            pts = _in_crop(det, img, box)
+            if pts is not None and all(np.linalg.norm(pts.mean(0) - f.mean(0)) > 0.5 * np.ptp(f[:, 0])
+                                       for f in faces):
+                faces.append(pts)
+            if len(faces) > face:
+                return faces[face]
+    if faces:
+        raise InvfaceError(f"{name}: --face {face}: only {len(faces)} face(s) found (numbered from 0, largest first)")
+    raise InvfaceError(f"{name}: no face found by the landmark detector (the whole frame, and crops around "
+                       f"{len(proposals)} face proposal(s)); draw the curves and pass --curves")
 
 
 class LandmarkTracker:
@@ -126,12 +218,17 @@ class LandmarkTracker:
     previous frame's face rather than detected afresh (steadier curves, and a face is kept
     through frames where a fresh detection would miss it). ``tracker(image_srgb, time_s,
     name)`` -> (478, 2) px as ``detect_landmarks``; a time not after the previous one starts
-    a new track. Use as a context manager or call ``close()``."""
+    a new track; a frame where the whole frame shows no face is detected on crops around face
+    proposals (``detect_landmarks``), and the track starts again after it. face: another face
+    than the first (numbered as ``detect_landmarks`` numbers them), found afresh each frame.
+    Use as a context manager or call ``close()``."""
 
-    def __init__(self):
-        self._det, self._last = None, None
+    def __init__(self, face=0):
+        self._det, self._last, self.face = None, None, int(face)
 
     def __call__(self, image_srgb, time_s, name="frame"):
+        if self.face:                        # another face than the first: found afresh each frame
+            return detect_landmarks(image_srgb, name, self.face)
         ms = int(round(1000 * float(time_s)))
         with native_stderr_quiet():
             if self._det is None or (self._last is not None and ms <= self._last):
@@ -140,6 +237,9 @@ class LandmarkTracker:
             self._last = ms
             img, size = _mp_image(image_srgb)
             found = self._det.detect_for_video(img, ms)
+        if not found.face_landmarks:         # too small for the whole frame: crops around proposals
+            self.close()
+            return detect_landmarks(image_srgb, name)
         return _points(found, size, name)
 
     def close(self):

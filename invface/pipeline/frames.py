@@ -56,7 +56,7 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
     history = {k: [] for k in kinds}
     rows = []
     single = len(clip) == 1
-    with LandmarkTracker() as tracker:
+    with LandmarkTracker(options.get("face", 0)) as tracker:
         for frame in clip.frames(start, stop):
             folder = None if out is None else Path(out) if single else Path(out) / frame.name
             h = frame_hash(frame.digest, inputs)

@@ -6,7 +6,7 @@ from ..errors import InvfaceError
 from .plates import _say
 
 
-def pick_neutral(model, clip, candidates=8, lam=None, progress=None):
+def pick_neutral(model, clip, candidates=8, lam=None, progress=None, face=0):
     """The clip's most neutral-looking frame to calibrate on (Eq. 14 once per shot): among up
     to ``candidates`` frames evenly spread over the selection, the one whose curve fit
     (Eq. 15, blendshape rig, ``pose_from_curves``) has the least expression: the sum of its
@@ -19,7 +19,7 @@ def pick_neutral(model, clip, candidates=8, lam=None, progress=None):
     for pos in positions:
         frame = next(clip.frames(pos, pos + 1))
         try:
-            curves, source = find_curves(model, frame.plate)
+            curves, source = find_curves(model, frame.plate, face=face)
         except InvfaceError as e:
             _say(progress, message=f"{frame.name}: not a calibration candidate ({e})")
             continue

@@ -60,12 +60,14 @@ def plate_frames(source):
     return [clip.paths[i] for i in clip.indices]
 
 
-def find_curves(model, plate, curves=None, detector=None):
+def find_curves(model, plate, curves=None, detector=None, face=0):
     """The plate's curves and where they came from: ``curves`` ({name: (n, 2) px}, or a curve
     file), else PLATE.curves.json beside the plate, else the landmark detector (whose face
     oval then becomes the plate's mask when it has none; ``detector(image_srgb, name)`` ->
     (478, 2) px replaces the single-image one, e.g. a ``fit.landmarks.LandmarkTracker`` in
-    a sequence). Curves mostly outside the plate are an InvfaceError
+    a sequence; face: which face the detector fits, 0 the first found, the whole frame first,
+    then crops around face proposals, largest first: ``fit.landmarks.detect_landmarks``).
+    Curves mostly outside the plate are an InvfaceError
     (``fit.curves.check_curves``). Returns ({name: (n, 2) px}, source)."""
     from ..fit.curves import check_curves, read_curves
     from ..fit.landmarks import curves_from_landmarks, detect_landmarks, face_mask
@@ -81,7 +83,8 @@ def find_curves(model, plate, curves=None, detector=None):
         if curves is not None:
             found, source = read_curves(curves, model, image_size=plate.camera.size), str(curves)
         else:
-            points = (detector or detect_landmarks)(linear_to_srgb(plate.image), name=str(path or "plate"))
+            image, name = linear_to_srgb(plate.image), str(path or "plate")
+            points = detector(image, name=name) if detector else detect_landmarks(image, name=name, face=face)
             if plate.mask is None:
                 plate.mask = face_mask(points, *plate.image.shape[:2])
             found, source = curves_from_landmarks(points), DETECTOR
@@ -349,13 +352,14 @@ class FrameFit:
 
 def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), starts=None, iterations=25,
               shading=True, lam_curves=None, solver="dogleg", notes=(), title=None, progress=None,
-              on_kind=None, source=None, camera=None, detector=None, temporal=0.0, temporal_shading=EQ16_TEMPORAL):
+              on_kind=None, source=None, camera=None, detector=None, temporal=0.0, temporal_shading=EQ16_TEMPORAL,
+              face=0):
     """Fit one plate with each model kind (paper 000, Eq. 15 then 16). plate: a Plate or a path;
     calibration: a Calibration or PlateCalibration of this model and camera set-up; curves:
     see ``find_curves`` (source: where given curves came from, for the report); starts: {kind: PlateFit} of the previous frame (warm start);
     lam_curves: lambda_1 of Eq. 15 (default: scaled with the face, ``curve_lambda``);
     on_kind(frame, kind): called as each kind finishes (to write it at once); camera: for a
-    plate path (see ``render.plates.load_plate``); detector: see ``find_curves``; temporal: the
+    plate path (see ``render.plates.load_plate``); detector, face: see ``find_curves``; temporal: the
     weight of the temporal term to the ``starts`` (``fit.curves.fit_curves``; px^2 per
     scale unit^2, scaled here with the face like lambda_1); temporal_shading: the shading
     stages' share of it (``fit.plate.fit_plate``). A kind whose simulation cannot reach an
@@ -365,12 +369,12 @@ def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), sta
     from ..fit.plate import fit_plate
     plate = as_plate(plate, camera)
     checked, calibration = calibration, getattr(calibration, "calibration", calibration)
-    curves, found = find_curves(model, plate, curves, detector)
+    curves, found = find_curves(model, plate, curves, detector, face)
     source = source or found
     lam = curve_lambda(curves, lam_curves)
     frame = FrameFit(model=model, plate=plate, curves=curves, source=source, notes=list(notes), title=title,
                      options={"curve_lambda": lam, "solver": solver, "temporal": temporal,
-                              "temporal_shading": temporal_shading},
+                              "temporal_shading": temporal_shading, "face": face if found == DETECTOR else None},
                      warnings=check_curves(curves, plate.camera.size, source)
                      + (checked.warnings() if isinstance(checked, PlateCalibration) else []))
     truth = truth_beside(plate)
