@@ -29,12 +29,20 @@ from . import template  # noqa: E402
 __version__ = "0.1.0"
 # the session layer's functions (invface.pipeline), imported on first use: importing invface
 # stays light, and the renderer and simulation load only when a fit needs them
-_PIPELINE = ("build_model", "fit_scan", "fit_plate", "calibrate", "simulate")
+_PIPELINE = ("build_model", "fit_scan", "fit_plate", "calibrate", "simulate", "export")
 __all__ = ["FaceModel", "Muscle", "Controls", "FitVector", "InvfaceError", "template", "__version__", *_PIPELINE]
 
 
+# the subpackages, imported on first use as attributes (``invface.pipeline.find_curves``): a bare
+# ``import invface`` loads neither Mitsuba nor the simulation
+_SUBPACKAGES = ("bridge", "fit", "io", "measure", "mesh", "model", "morph", "pipeline", "render", "report", "sim",
+                "template")
+
+
 def __getattr__(name):
+    import importlib
     if name in _PIPELINE:
-        from . import pipeline
-        return getattr(pipeline, name)
+        return getattr(importlib.import_module(".pipeline", __name__), name)
+    if name in _SUBPACKAGES:
+        return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'invface' has no attribute {name!r}")

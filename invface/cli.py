@@ -399,6 +399,14 @@ def cmd_report(args):
     return 0
 
 
+def cmd_export(args):
+    """Write an existing fit run's exports (``pipeline.outputs.export``)."""
+    from .pipeline.outputs import export
+    for path in export(args.run, [f.strip() for f in args.format.split(",") if f.strip()], fps=args.fps):
+        print(f"wrote {path}")
+    return 0
+
+
 def cmd_demo(args):
     """Build the template, write previews and expression sheets, then calibrate and fit a plate."""
     from .pipeline import build_model
@@ -473,6 +481,8 @@ NON_NEGATIVE_INT = _number(int, 0)
 def build_parser():
     from .fit.lambdas import EQ13_LAMBDA, EQ16_TEMPORAL, TEMPORAL_LAMBDA
     p = argparse.ArgumentParser(prog="invface", description="Anatomically based, differentiable face capture.")
+    from . import __version__
+    p.add_argument("--version", action="version", version=f"invface {__version__}")
     p.add_argument("--debug", action="store_true", help="show tracebacks and native libraries' log lines "
                                                         "(also INVFACE_DEBUG=1)")
     sub = p.add_subparsers(dest="command", required=True)
@@ -588,6 +598,12 @@ def build_parser():
     rp = sub.add_parser("report", help="(re)write the HTML report of a fit folder")
     rp.add_argument("run", help="folder with fit.json (or sub-folders with one each)")
     rp.set_defaults(func=cmd_report)
+    ex = sub.add_parser("export", help="write an existing fit run's exports (the Live Link Face CSV of ARKit's "
+                                       "52 controls per kind) into its folder")
+    ex.add_argument("run", help="a fit-plate output folder")
+    ex.add_argument("--format", default="csv", help="comma-separated formats: csv (arkit_<kind>.csv)")
+    ex.add_argument("--fps", type=POSITIVE, help="the clip's frame rate for the timecodes (default: the run's, else 24)")
+    ex.set_defaults(func=cmd_export)
     cam = sub.add_parser("camera", help="camera tools")
     camsub = cam.add_subparsers(dest="camera_command", required=True)
     cc = camsub.add_parser("calibrate", help="intrinsics and distortion from checkerboard images (OpenCV)")

@@ -80,3 +80,9 @@ def test_simulate_refuses_an_output_it_cannot_write_before_solving(monkeypatch, 
     assert cli.main(["simulate", "--set", "zygomaticus_major_L=0.5", "-o", "result"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "-o result" in err[0] and ".obj" in err[0], err
+
+
+def test_version(capsys):
+    from invface import __version__
+    assert cli.main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"invface {__version__}"

@@ -58,3 +58,32 @@ def test_timecodes():
     assert timecode(2.5, 30) == "00:00:00:02.500"
     with pytest.raises(Exception, match="frame rate"):
         timecode(1, 0)
+
+
+def test_export_of_an_existing_run(tmp_path):
+    """``invface.export(run_dir)`` (and ``invface export DIR``) writes a run's Live Link CSV from
+    its fit.json files: a photo's (<kind>/fit.json) and a sequence's (run.json's frames)."""
+    import json
+
+    import invface
+    from invface.errors import InvfaceError
+    arkit = dict.fromkeys(ARKIT_NAMES, 0.0)
+    photo = tmp_path / "photo"
+    (photo / "blendshape").mkdir(parents=True)
+    (photo / "blendshape" / "fit.json").write_text(json.dumps({"arkit": dict(arkit, jawOpen=0.5), "rotation": [0, 0.1, 0]}))
+    paths = invface.export(photo)
+    assert [p.name for p in paths] == ["arkit_blendshape.csv"]
+    rows = read_livelink_csv(paths[0])
+    assert len(rows) == 1 and rows[0]["JawOpen"] == 0.5 and rows[0]["HeadYaw"] == pytest.approx(0.1)
+    clip = tmp_path / "clip"
+    (clip / "run.json").parent.mkdir()
+    (clip / "run.json").write_text(json.dumps({"frames": ["f0", "f1"], "fps": 30.0}))
+    for i in range(2):
+        (clip / f"f{i}" / "simulation").mkdir(parents=True)
+        (clip / f"f{i}" / "simulation" / "fit.json").write_text(json.dumps({"frame": 30 + i, "arkit": arkit}))
+    rows = read_livelink_csv(invface.export(clip)[0])
+    assert [r["Timecode"] for r in rows] == ["00:00:01:00.000", "00:00:01:01.000"]          # 30 fps
+    with pytest.raises(InvfaceError, match="holds no fit"):
+        invface.export(tmp_path)
+    with pytest.raises(InvfaceError, match="export format 'usd': use csv"):
+        invface.export(photo, formats="usd")

@@ -215,3 +215,14 @@ def test_a_kind_that_cannot_finish_is_recorded_and_the_others_are_written(small_
     assert frame.fits == {} and earlier_fits(tmp_path / "none") == []
     with pytest.raises(InvfaceError, match="no model kind finished: blendshape: Newton did NOT"):
         frame.save(tmp_path / "none")
+
+
+def test_subpackages_are_attributes_and_a_bare_import_stays_light():
+    """After ``import invface`` the subpackages and their modules are reachable as attributes
+    (imported then), and the bare import loads neither Mitsuba nor Dr.Jit."""
+    code = ("import sys, invface; light = 'mitsuba' not in sys.modules and 'drjit' not in sys.modules; "
+            "ok = callable(invface.pipeline.find_curves) and callable(invface.report.fit.write_report) "
+            "and callable(invface.render.renderer.FaceRenderer) and callable(invface.sim.quasistatic.Simulator) "
+            "and callable(invface.io.export) and callable(invface.fit.shading.fit_shading); print(light, ok)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert out.stdout.split() == ["True", "True"], out.stdout + out.stderr

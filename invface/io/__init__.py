@@ -13,3 +13,7 @@ from .atomic import atomic_open, atomic_path, write_bytes, write_text
 from .exporters import export, exporter
 
 __all__ = ["atomic_open", "atomic_path", "write_bytes", "write_text", "export", "exporter"]
+
+from .._lazy import submodules as _submodules  # noqa: E402
+
+__getattr__ = _submodules(__name__, __path__)

@@ -4,3 +4,7 @@ from .facemodel import FaceModel, register_surface_model
 from .muscle import Muscle
 
 __all__ = ["FaceModel", "Muscle", "Controls", "FitVector", "register_surface_model"]
+
+from .._lazy import submodules as _submodules  # noqa: E402
+
+__getattr__ = _submodules(__name__, __path__)

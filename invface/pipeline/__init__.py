@@ -23,6 +23,7 @@ from .plates import (FrameFit, PlateCalibration, PoseEstimate, as_plate, auto_ca
                      curve_lambda, find_curves, fit_frame, model_kinds, plate_frames, pose_from_curves,
                      score_against_truth)
 from .clips import Clip, open_clip
+from .outputs import export
 from .sequence import fit_sequence
 from .scans import ScanResult, fit_scan
 from .simulate import Simulation, simulate
@@ -69,4 +70,8 @@ def fit_plate(plate, calibration=None, model=None, kinds=("blendshape",), curves
 __all__ = ["Clip", "open_clip", "ModelBuild", "build_model", "load_model", "FrameFit", "PlateCalibration", "PoseEstimate",
            "as_plate", "auto_calibrate", "calibrate", "calibrate_plate", "curve_lambda", "find_curves",
            "fit_frame", "fit_plate", "fit_sequence", "model_kinds", "plate_frames", "pose_from_curves",
-           "score_against_truth", "ScanResult", "fit_scan", "Simulation", "simulate"]
+           "score_against_truth", "ScanResult", "fit_scan", "Simulation", "simulate", "export"]
+
+from .._lazy import submodules as _submodules  # noqa: E402
+
+__getattr__ = _submodules(__name__, __path__)

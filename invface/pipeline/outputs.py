@@ -145,3 +145,29 @@ def write_sequence_outputs(out, kinds, fps=0.0):
     paths += [p for k in kinds if (p := write_overlay_video(out, k, fps or 24.0)) is not None]
     paths.append(write_sequence_report(out))
     return paths
+
+
+EXPORT_FORMATS = ("csv",)
+
+
+def export(run_dir, formats=("csv",), fps=None):
+    """Write an existing fit run's exports into its folder: "csv" is the Live Link Face CSV per
+    kind (``write_arkit_csv``: arkit_<kind>.csv). run_dir: a fit-plate output folder (a photo's,
+    with <kind>/fit.json, or a sequence's, with <frame>/<kind>/fit.json); fps: the clip's frame
+    rate (default run.json's, else 24). Returns the paths written; InvfaceError naming the folder
+    when it holds no fit, or an unknown format."""
+    from ..errors import InvfaceError
+    from .runs import read_run
+    run = Path(run_dir)
+    formats = [formats] if isinstance(formats, str) else list(formats)
+    for f in formats:
+        if f not in EXPORT_FORMATS:
+            raise InvfaceError(f"export format '{f}': use " + ", ".join(EXPORT_FORMATS))
+    single = [k for k in ("blendshape", "simulation") if (run / k / "fit.json").is_file()]
+    frames = read_run(run).get("frames") or []            # a sequence's run.json lists its frames
+    kinds = single or [k for k in ("blendshape", "simulation") if frames and any(run.glob(f"*/{k}/fit.json"))]
+    if not kinds:
+        raise InvfaceError(f"{run}: holds no fit (no <kind>/fit.json, nor a sequence's run.json with "
+                           "<frame>/<kind>/fit.json): give a fit-plate output folder")
+    rate = fps or read_run(run).get("fps") or 24.0
+    return write_arkit_csv(run, kinds, rate, single=bool(single)) if "csv" in formats else []

@@ -49,6 +49,7 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
     options.setdefault("temporal", TEMPORAL_LAMBDA)
     options.setdefault("temporal_shading", EQ16_TEMPORAL)
     inputs = run_hash(model, calibration, dict(options, curves=str(curves) if curves is not None else None))
+    extra = dict(extra or {}, **({"fps": float(clip.fps)} if clip.fps else {}))    # the exports' timecodes
     if out is not None and start_run(out, clip.names if len(clip) > 1 else [], kinds, force, inputs, extra):
         _say(progress, message=f"{out}: resuming the run there (same inputs): its finished frames are skipped")
     if (workers or scheduler) and len(clip) > 1:
