@@ -86,3 +86,23 @@ def test_version(capsys):
     from invface import __version__
     assert cli.main(["--version"]) == 0
     assert capsys.readouterr().out.strip() == f"invface {__version__}"
+
+
+@pytest.mark.parametrize("verb", [["build-model"], ["simulate"], ["calibrate"], ["fit-scan"], ["fit-plate"],
+                                  ["report"], ["export"], ["camera", "calibrate"], ["demo"]])
+def test_every_verbs_help_states_its_defaults(verb, capsys):
+    assert cli.main([*verb, "--help"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: invface") and ("(default:" in out or verb == ["report"]), out[:300]
+
+
+def test_a_fully_transparent_plate_is_refused_before_fitting(tmp_path, capsys):
+    import numpy as np
+
+    from invface.io.images import write_image
+    img = np.concatenate([np.full((60, 80, 3), 0.5, np.float32), np.zeros((60, 80, 1), np.float32)], -1)
+    write_image(tmp_path / "clear.png", img)
+    assert cli.main(["fit-plate", str(tmp_path / "clear.png"), "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "clear.png: its alpha channel is transparent everywhere" in err[-1], err
+    assert not (tmp_path / "out").exists()

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import CameraError
+from ..errors import CameraError, ImageError
 # the image readers and writers live in io.images; they stay importable from here, where
 # users' scripts found them
 from ..io.images import EXTS, SRGB_EXTS, linear_to_srgb, read_image, srgb_to_linear, write_image  # noqa: F401
@@ -62,5 +62,8 @@ def load_plate(path, camera=None):
     mask = None
     if alpha is not None:
         mask = undistort(alpha[..., None], camera)[0][..., 0] > 0.5
+        if not mask.any():
+            raise ImageError(f"{path}: its alpha channel is transparent everywhere, so no pixel is left to fit: "
+                             "save the plate with the face opaque, or without an alpha channel")
     image, camera = undistort(image, camera)
     return Plate(image=image, camera=camera, path=str(path), mask=mask)
