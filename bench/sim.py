@@ -9,10 +9,10 @@ material stiffness, a warm-started re-solve (median and range of five), and peak
 (ru_maxrss).
 """
 import argparse
-import resource
 import time
 
 import numpy as np
+from _common import add_json_option, peak_rss_mib, write_json
 
 import invface
 from invface.sim.quasistatic import Simulator
@@ -50,25 +50,32 @@ def run(resolution, solver):
               f"per it: assembly {r.seconds['assembly'] / it:.3f}  factor {r.seconds['factor'] / it:.3f}  "
               f"solve {r.seconds['solve'] / it:.3f}  line search {r.seconds['line_search'] / it:.3f} s")
     flesh_kernel(sim, rows[0][1])
+    figures = {label: {"iterations": r.iterations, "seconds": sum(r.seconds.values())} for label, r in rows}
     times = []
     for _ in range(5):          # the same solve five times: a quarter-second's spread is the machine's
         warm = sim.solve({k: 0.85 for k in smile}, warm=rows[0][1])
         times.append(sum(warm.seconds.values()))
     print(f"  warm re-solve      {warm.iterations:2d} it  {np.median(times):6.2f} s median of 5, "
           f"{min(times):.2f}-{max(times):.2f} s  (smile 0.80 -> 0.85)")
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    peak = peak_rss_mib()
     print(f"  set-up {setup:.2f} s; peak memory {peak:.0f} MB")
+    figures.update(warm_resolve_median_s=float(np.median(times)), warm_iterations=warm.iterations, setup_s=setup,
+                   peak_mib=peak)
+    return figures
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--resolutions", type=float, nargs="+", default=[1.0, 4.0, 10.0])
     ap.add_argument("--solver", default=None)
+    add_json_option(ap)
     a = ap.parse_args()
+    figures = {}
     for res in a.resolutions:
         m = invface.template.build(resolution=res, expressions=False)
         print(f"resolution {res:g}: {len(m.tets)} tets, {len(m.rest_positions)} vertices", flush=True)
-        run(res, a.solver)
+        figures[f"resolution {res:g}"] = dict(run(res, a.solver), tets=len(m.tets))
+    write_json(a.json, figures)
 
 
 if __name__ == "__main__":
