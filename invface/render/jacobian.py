@@ -33,7 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..mesh.triangles import unique_edges
-from .shading import BAND_WEIGHTS, _Y
+from .shading import BAND_WEIGHTS, _Y, shading_basis
 
 BAND = 2                 # px: the band around silhouettes and occlusion edges that ``band`` marks
 EDGE_STRETCH = 4.0       # an occlusion edge or fold: neighbouring hits further apart than this many pixel footprints
@@ -201,7 +201,7 @@ class RasterJacobian:
         n = m / norm[:, None]
         g = np.asarray(gamma, float).reshape(9, 3)
         a = np.asarray(albedo, float).reshape(V, 3)
-        c = a * (((_Y * BAND_WEIGHTS / np.pi) * _basis(n)) @ g)                # vertex radiance (V,3)
+        c = a * (shading_basis(n) @ g)                                      # vertex radiance (V,3)
         hit, s, prim, b1, b2, t = self._cast(x, parts_x, rotation, translation)
         tri = self.faces[prim]
         bary = np.stack([1 - b1 - b2, b1, b2], 1) / k2                      # (hits, 3), / samples
@@ -297,10 +297,3 @@ class RasterJacobian:
             edge[b] |= jump
         kernel = np.ones((2 * BAND + 1, 2 * BAND + 1), np.uint8)
         return cv2.dilate(edge.astype(np.uint8), kernel) > 0
-
-
-def _basis(n):
-    """The unnormalised real SH polynomials (V, 9) at unit normals n (V,3) (``shading._Y``
-    scales them)."""
-    x, y, z = n.T
-    return np.stack([np.ones_like(x), y, z, x, x * y, y * z, 3 * z * z - 1, x * z, x * x - y * y], 1)
