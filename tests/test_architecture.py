@@ -334,3 +334,18 @@ def test_exporter_table(tmp_path):
     assert {".obj", ".ply", ".png", ".exr", ".json", ".npz", ".csv", ".html"} <= set(suffixes())
     with pytest.raises(ConfigError, match=r"result: cannot write '\(no suffix\)' files; use one of"):
         exporter(tmp_path / "result")
+
+
+def test_written_files_get_the_usual_mode(tmp_path):
+    """The temporary file's private mode (0600) is not what the user gets: a written file has the
+    mode a plain open() gives a new file under the process's umask."""
+    import os
+    import stat
+
+    from invface.io.atomic import write_text
+    mask = os.umask(0)
+    os.umask(mask)
+    write_text(tmp_path / "page.html", "<p>")
+    (tmp_path / "plain.html").write_text("<p>")
+    mode = lambda p: stat.S_IMODE(p.stat().st_mode)
+    assert mode(tmp_path / "page.html") == mode(tmp_path / "plain.html") == 0o666 & ~mask

@@ -16,6 +16,16 @@ import tempfile
 from pathlib import Path
 
 
+def _umask():
+    """The process's umask (read by setting it and setting it back)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_MODE = 0o666 & ~_umask()        # what open() would give a new file: mkstemp's own is 0600
+
+
 def _fsync(path):
     """Flush a written file to disk (best effort: some file systems refuse fsync)."""
     try:
@@ -43,6 +53,7 @@ def atomic_path(path):
     try:
         yield tmp
         _fsync(tmp)
+        os.chmod(tmp, _MODE)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
