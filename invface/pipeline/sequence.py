@@ -8,7 +8,8 @@ checkpoints, resume, bad-frame flags and animation-curve output.
 
 This module dispatches: the frame loop (``frames.fit_frames``) on this process, or the same
 per-frame code on a Dask cluster, chunk by chunk (``distributed.fit_sequence_distributed``);
-``runs`` keeps the run's bookkeeping and resume; ``outputs`` writes the curves, videos and page.
+``runs`` keeps the run's bookkeeping and resume; ``outputs`` writes the curves, the Live Link Face CSV,
+the videos and the page.
 """
 from __future__ import annotations
 
