@@ -46,3 +46,12 @@ def face_scale(curves):
         return 1.0, float("nan")
     d = float(np.linalg.norm(np.asarray(curves["eye_L_upper"])[0] - np.asarray(curves["eye_R_upper"])[0]))
     return (d / SAMPLE_EYE_PX) ** 2, d
+
+
+def curve_lambda(curves, lam=None):
+    """Eq. 15's lambda_1 (px^2 per unit weight^2) for plate curves {name: (n, 2) px}: ``lam`` when
+    given, else EQ15_LAMBDA_1 scaled with the face's area in pixels (``face_scale``), so a face
+    twice as wide in the image gets four times the weight, as its curve term does. The session
+    layer (and so the CLI) resolves lambda_1 here; the fit layer's own default is still the
+    unscaled EQ15_LAMBDA_1 (a face-scaled default there changes the tests' tuned plates)."""
+    return float(lam) if lam is not None else EQ15_LAMBDA_1 * face_scale(curves)[0]

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import InvfaceError, SimulationError
 from ..fit.curves import rms_px
-from ..fit.lambdas import EQ14_LAMBDA, EQ15_LAMBDA_1, EQ16_TEMPORAL, face_scale
+from ..fit.lambdas import EQ14_LAMBDA, EQ16_TEMPORAL, curve_lambda, face_scale
 
 KINDS = ("blendshape", "simulation")
 DETECTOR = "landmark detector"
@@ -90,12 +90,6 @@ def find_curves(model, plate, curves=None, detector=None, face=0):
             found, source = curves_from_landmarks(points), DETECTOR
     check_curves(found, plate.camera.size, source)          # curves off the plate: an error
     return found, source
-
-
-def curve_lambda(curves, lam=None):
-    """lambda_1 of Eq. 15 for these plate curves: ``lam`` when given, else the paper's 3600
-    scaled by the face's area in pixels (``fit.lambdas.face_scale``)."""
-    return float(lam) if lam is not None else EQ15_LAMBDA_1 * face_scale(curves)[0]
 
 
 @dataclass
