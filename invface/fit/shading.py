@@ -320,6 +320,7 @@ class ShadingObjective:
         _, xr = posed_surface(self.sm, z, self.vec)
         parts_x = posed_parts(self.model, z, self.vec)
         x, img, r = self._render(xr, parts_x)
+        rgb = self._rgb                  # this point's render: the analytic Jacobian's edge term
         rr, _ = self._prior_and_curves(z, xr)
         psi, dpsi = huber_rows(r, self.robust)
         cost = self._cost(psi, rr)
@@ -337,7 +338,7 @@ class ShadingObjective:
         def hessian(free):
             # the image Jacobian's columns only for the variables that can move
             f = np.flatnonzero(free)
-            C = self.image_jacobian(at["xr"], at["J"][f], parts_x=parts_x, index=f)
+            C = self.image_jacobian(at["xr"], at["J"][f], parts_x=parts_x, index=f, image=rgb)
             if self.robust is not None:
                 C *= dpsi[None, :].astype(np.float32)
             H = at["Jr"].T @ at["Jr"]
@@ -346,10 +347,12 @@ class ShadingObjective:
 
         return NormalEquations(cost, gradient_fn=gradient, hessian_fn=hessian)
 
-    def image_jacobian(self, xr, Jall, spp=None, parts_x=None, index=None):
+    def image_jacobian(self, xr, Jall, spp=None, parts_x=None, index=None, image=None):
         """J^T of the image residual r = G M (F - F*): (z size, m) float32, one row per
         parameter along d xr / dz_k = Jall[k] (V, 3), for the posed surface xr (V, 3) with the
-        inner parts at parts_x (P, 3), fixed. index: the z entries of Jall's rows (default all).
+        inner parts at parts_x (P, 3), fixed. index: the z entries of Jall's rows (default all);
+        image: the render at xr (h, w, 3) for the analytic rows' edge term (default the last
+        render's).
         jacobian 'analytic': every row by ``analytic_jacobian`` (visibility held fixed, one ray
         cast for all rows); 'forward': every row by ``forward_jacobian``; 'hybrid': the
         blendshape weights' rows analytic and the jaw's and the head pose's 12 by forward mode
@@ -358,23 +361,24 @@ class ShadingObjective:
         if self.jacobian == "forward":
             return self.forward_jacobian(xr, Jall, spp, parts_x)
         if self.jacobian == "analytic":
-            return self.analytic_jacobian(xr, Jall, parts_x)
+            return self.analytic_jacobian(xr, Jall, parts_x, image)
         index = np.arange(len(Jall)) if index is None else np.asarray(index)
         shapes = index < self.vec.K
         C = np.empty((len(Jall), len(self.target)), np.float32)
         if shapes.any():
-            C[shapes] = self.analytic_jacobian(xr, Jall[shapes], parts_x)
+            C[shapes] = self.analytic_jacobian(xr, Jall[shapes], parts_x, image)
         if (~shapes).any():
             C[~shapes] = self.forward_jacobian(xr, Jall[~shapes], spp, parts_x)
         return C
 
-    def analytic_jacobian(self, xr, Jall, parts_x=None):
+    def analytic_jacobian(self, xr, Jall, parts_x=None, image=None):
         """``image_jacobian`` with visibility held fixed (``render.jacobian``): one ray cast
         linearises the image at xr, and every row is products with its sparse barycentric
-        matrix; at silhouettes and occlusion edges, the last render's image gradient times the
-        skin's motion on the screen (OpenDR's boundary derivative; the gradient's backward pass
-        keeps the exact silhouette term of the render)."""
-        lin = self.raster.linearise(xr, self.gamma, self.albedo, parts_x=parts_x, image=self._rgb)
+        matrix; at silhouettes and occlusion edges, the render's image gradient (``image`` at xr,
+        default the last render's) times the skin's motion on the screen (OpenDR's boundary
+        derivative; the gradient's backward pass keeps the exact silhouette term of the render)."""
+        lin = self.raster.linearise(xr, self.gamma, self.albedo, parts_x=parts_x,
+                                    image=self._rgb if image is None else image)
         C = np.empty((len(Jall), len(self.target)), np.float32)
 
         def rows(k0, block):
