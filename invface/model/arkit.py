@@ -16,8 +16,9 @@ A model's blendshapes reach ARKit by name:
 The jaw is a bone with 6 DOF (``rig.JAW_NAMES``); four ARKit controls read it, 1.0 being the
 jaw's bound in that direction:
 - jawOpen = jaw_rx / rig.JAW_UPPER[0] (0.6 rad);
-- jawLeft = jaw_tx / 8 mm, jawRight = -jaw_tx / 8 mm (the jaw frame's x, the actor's left);
-- jawForward = jaw_tz / 8 mm (the jaw frame's z, out of the face).
+- jawLeft = jaw_tx / JAW_UPPER[3], jawRight = jaw_tx / JAW_LOWER[3] (+-8 mm along the jaw
+  frame's x, the actor's left);
+- jawForward = jaw_tz / JAW_UPPER[5] (8 mm along the jaw frame's z, out of the face).
 The jaw's roll and yaw (jaw_ry, jaw_rz) and its vertical slide (jaw_ty) have no ARKit name; they
 stay in fit.json's ``jaw``. The built-in head's blendshape named jawOpen is the soft tissue that
 goes with an open jaw (its jaw pose is the fit's jaw_rx), so ARKit's jawOpen reads the jaw.
@@ -32,6 +33,7 @@ import re
 import numpy as np
 
 from ..errors import ControlsError
+from .rig import JAW_LOWER, JAW_UPPER
 
 ARKIT_NAMES = (
     "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft", "eyeSquintLeft",
@@ -46,8 +48,6 @@ ARKIT_NAMES = (
     "noseSneerRight", "tongueOut",
 )
 JAW_CONTROLS = ("jawOpen", "jawLeft", "jawRight", "jawForward")
-JAW_LATERAL = 0.008      # m: jaw_tx at jawLeft / jawRight 1.0
-JAW_FORWARD = 0.008      # m: jaw_tz at jawForward 1.0
 
 # the built-in head's FACS-style controls and the ARKit controls each one drives
 LEGACY = {
@@ -101,7 +101,6 @@ def arkit_values(names, weights, jaw):
     """{ARKit name: value in [0, 1]} for all 52, from a model's blendshape names (K,), their
     weights (K,) and the jaw (6,) (``rig.JAW_NAMES``). Several shapes driving one control
     (browInnerUp_L and _R) give it their mean."""
-    from .rig import JAW_UPPER
     total = dict.fromkeys(ARKIT_NAMES, 0.0)
     count = dict.fromkeys(ARKIT_NAMES, 0)
     for n, w in zip(names, np.asarray(weights, float)):
@@ -110,8 +109,8 @@ def arkit_values(names, weights, jaw):
             count[a] += 1
     out = {a: total[a] / count[a] if count[a] else 0.0 for a in ARKIT_NAMES}
     j = np.asarray(jaw, float)
-    out.update(jawOpen=j[0] / JAW_UPPER[0], jawLeft=j[3] / JAW_LATERAL, jawRight=-j[3] / JAW_LATERAL,
-               jawForward=j[5] / JAW_FORWARD)
+    out.update(jawOpen=j[0] / JAW_UPPER[0], jawLeft=j[3] / JAW_UPPER[3], jawRight=j[3] / JAW_LOWER[3],
+               jawForward=j[5] / JAW_UPPER[5])
     return {a: round(float(np.clip(v, 0.0, 1.0)), 6) for a, v in out.items()}
 
 
