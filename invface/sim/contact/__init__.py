@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...mesh.tets import boundary_faces
 from .base import CONTACT_SMOOTHING, ContactModel, ContactSet, penalty
 from .eyeballs import EyeballContacts, eyeball_spheres
 from .triangles import MIN_CONTACT_RADIUS, TriangleContacts
@@ -22,9 +21,6 @@ def default_contacts(model, free_mask, stiffness, radius, adjacency=None):
     eyeball spheres, each with stiffness (N/m) and pairing radius (m); adjacency: the tet
     mesh's vertex connectivity when the caller has it. Returns [TriangleContacts,
     EyeballContacts]."""
-    X0 = np.asarray(model.rest_positions, float)
-    faces, _ = boundary_faces(model.tets)
-    bverts = np.unique(faces)
-    free_boundary = bverts[free_mask[bverts]]
-    return [TriangleContacts(model, free_mask, stiffness, radius, adjacency),
-            EyeballContacts(X0, free_boundary, eyeball_spheres(model), stiffness, radius)]
+    triangles = TriangleContacts(model, free_mask, stiffness, radius, adjacency)
+    return [triangles, EyeballContacts(np.asarray(model.rest_positions, float), triangles.candidates,
+                                       eyeball_spheres(model), stiffness, radius)]

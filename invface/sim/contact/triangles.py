@@ -206,7 +206,8 @@ class TriangleContacts(ContactModel):
         faces, _ = boundary_faces(tets)
         nrm = vertex_normals(X0, faces, N)
         bverts = np.unique(faces)
-        cand = bverts[free_mask[bverts]]
+        #: the free boundary vertices (sorted ids): the vertices that can touch anything
+        self.candidates = cand = bverts[free_mask[bverts]]
 
         # flesh on flesh
         tri = faces[free_mask[faces].all(1)]
