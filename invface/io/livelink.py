@@ -22,13 +22,12 @@ Readers match columns by name (``read_livelink_csv``), never by position.
 from __future__ import annotations
 
 import csv
-import io
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InvfaceError
-from .atomic import write_text
+from .tables import write_csv
 
 HEAD_COLUMNS = ("HeadYaw", "HeadPitch", "HeadRoll")
 EYE_COLUMNS = ("LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll", "RightEyeYaw", "RightEyePitch", "RightEyeRoll")
@@ -64,17 +63,15 @@ def write_livelink_csv(path, frames, arkit_names, fps=24.0):
     (the index at ``fps``), "arkit" ({ARKit name: value}), "rotation" (3,) rad (Euler XYZ) and
     optionally "eyes" (6,) rad (left yaw, pitch, roll, right yaw, pitch, roll). Returns the Path."""
     names = list(arkit_names)
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(columns(names))
+    rows = []
     for f in frames:
         rot = np.asarray(f.get("rotation", np.zeros(3)), float)
         eyes = np.asarray(f.get("eyes", np.zeros(6)), float)
         values = [float(f["arkit"].get(n, 0.0)) for n in names]
         head = [rot[1], rot[0], rot[2]]                     # yaw (about +Y), pitch (+X), roll (+Z)
-        w.writerow([timecode(f.get("frame", 0), fps), len(values) + 9,
-                    *(f"{v:.6f}" for v in values + head + list(eyes))])
-    return write_text(path, buf.getvalue())
+        rows.append([timecode(f.get("frame", 0), fps), len(values) + 9,
+                     *(f"{v:.6f}" for v in values + head + list(eyes))])
+    return write_csv(path, columns(names), rows, lineterminator="\n")
 
 
 def read_livelink_csv(path):
