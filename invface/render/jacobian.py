@@ -153,6 +153,7 @@ class RasterJacobian:
         d = np.stack([u, v, np.ones_like(u)], 1) @ np.linalg.inv(cam.K).T @ cam.R     # world directions
         self.d = d / np.linalg.norm(d, axis=1, keepdims=True)
         self.origin = np.asarray(cam.center, float)
+        self._ray = None
         self.footprint = 1.0 / float(cam.K[0, 0])                          # m per px per m of depth
         faces = np.asarray(renderer.faces, np.int64).reshape(-1, 3)
         self.faces = faces
@@ -168,21 +169,24 @@ class RasterJacobian:
         self.edge_faces = np.stack([owner[first], np.where(count > 1, owner[np.minimum(first + 1, nf * 3 - 1)], -1)], 1)
 
     def _cast(self, xr, parts_x, rotation, translation):
-        """(skin hit (S,) bool, triangle ids (S,), barycentrics b1, b2 (S,), distances (S,)) of
-        the rays at the posed surface xr (V,3) (the inner parts at parts_x, unposed)."""
+        """The rays at the posed surface xr (V,3) (the inner parts at parts_x, unposed): (skin
+        hit (S,) bool, the hits' ray ids (H,), their triangle ids and barycentrics b1, b2 (H,),
+        every ray's distance to its first hit of any shape (S,), inf for a miss)."""
         r, mi, dr = self.renderer, self.renderer.mi, self.renderer.dr
         with dr.suspend_grad():
+            if self._ray is None:                # the rays are fixed: made once, as Mitsuba arrays
+                o = np.broadcast_to(self.origin, self.d.shape)
+                self._ray = mi.Ray3f(mi.Point3f(*(o[:, i].astype(np.float32) for i in range(3))),
+                                     mi.Vector3f(*(self.d[:, i].astype(np.float32) for i in range(3))))
             r.place(np.asarray(xr, np.float32), parts_x, rotation, translation)
-            o = np.broadcast_to(self.origin, self.d.shape)
-            ray = mi.Ray3f(mi.Point3f(*(o[:, i].astype(np.float32) for i in range(3))),
-                           mi.Vector3f(*(self.d[:, i].astype(np.float32) for i in range(3))))
-            pi = r.scene.ray_intersect_preliminary(ray, coherent=True)
-            hit = np.array(pi.is_valid() & (pi.shape == mi.ShapePtr(r.face_shape)), bool)
+            pi = r.scene.ray_intersect_preliminary(self._ray, coherent=True)
+            valid = np.array(pi.is_valid(), bool)
+            hit = valid & np.array(pi.shape == mi.ShapePtr(r.face_shape), bool)
             s = np.flatnonzero(hit)
             prim = np.array(pi.prim_index, np.int64)[s]
             uv = np.array(pi.prim_uv, np.float64)[:, s]
             t = np.array(pi.t, np.float64)
-        return hit, s, prim, uv[0], uv[1], np.where(np.array(pi.is_valid(), bool), t, np.inf)
+        return hit, s, prim, uv[0], uv[1], np.where(valid, t, np.inf)
 
     def linearise(self, xr, gamma, albedo, parts_x=None, rotation=None, translation=None, image=None):
         """The ``Linearisation`` at the posed skin xr (V,3) m under light gamma (9,3) and albedo
