@@ -97,11 +97,15 @@ def _landmarker(mode):
     return vision.FaceLandmarker.create_from_options(opts)
 
 
+def _uint8(image_srgb):
+    """An sRGB image as 8-bit (H, W, C): uint8 as it is, floats in [0, 1] rounded."""
+    img = np.asarray(image_srgb)
+    return img if img.dtype == np.uint8 else (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
 def _mp_image(image_srgb):
     import mediapipe as mp
-    img = np.asarray(image_srgb)
-    if img.dtype != np.uint8:
-        img = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+    img = _uint8(image_srgb)
     return mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(img[..., :3])), img.shape[:2]
 
 
@@ -125,9 +129,7 @@ def face_proposals(image_srgb):
     crop is the tile). MediaPipe's detector sees the whole frame at 128 px: a small face in a
     wide frame needs a crop around such a box."""
     import cv2
-    img = np.asarray(image_srgb)
-    if img.dtype != np.uint8:
-        img = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+    img = _uint8(image_srgb)
     grey = cv2.equalizeHist(cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_RGB2GRAY))
     k = min(1.0, PROPOSAL_FRAME / max(grey.shape))
     if k < 1:
@@ -189,9 +191,7 @@ def detect_landmarks(image_srgb, name="plate", face=0):
     The whole frame is tried first. Where it finds no face, or ``face`` asks for another than
     the first, each ``face_proposals`` box is tried on a crop around it, and the faces found
     there, largest first, are numbered from 0: ``face`` picks one."""
-    img = np.asarray(image_srgb)
-    if img.dtype != np.uint8:
-        img = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+    img = _uint8(image_srgb)
     with native_stderr_quiet(), _landmarker("IMAGE") as det:
         if face == 0:
             mp_img, size = _mp_image(img)
