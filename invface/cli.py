@@ -4,6 +4,7 @@ memory) prints as one line and exits with status 2; an internal error as one lin
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -453,9 +454,9 @@ CURVE_LAMBDA_HELP = ("weight regulariser lambda_1 of the curve fit, Eq. 15 (px^2
                      "corners, 224 on the sample plates)")
 
 
-def _number(cast, low=None, strict=False, high=None):
+def _number(cast, low=None, strict=False):
     """An argparse type: a finite number of ``cast`` (int or float) at least ``low`` (above it
-    when ``strict``) and at most ``high``; argparse names the option when it refuses one."""
+    when ``strict``); argparse names the option when it refuses one."""
     def check(text):
         try:
             v = cast(text)
@@ -465,10 +466,19 @@ def _number(cast, low=None, strict=False, high=None):
             raise argparse.ArgumentTypeError(f"must be a finite number, not {text}")
         if low is not None and (v <= low if strict else v < low):
             raise argparse.ArgumentTypeError(f"must be {'>' if strict else '>='} {low:g}, not {text}")
-        if high is not None and v > high:
-            raise argparse.ArgumentTypeError(f"must be <= {high:g}, not {text}")
         return v
     return check
+
+
+class _DefaultsHelp(argparse.HelpFormatter):
+    """Help that states each option's default: appended as "(default: X)" where the option has a
+    value for it and its text does not describe the default already."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if action.default in (None, False, argparse.SUPPRESS) or "default" in text.lower():
+            return text
+        return text + " (default: %(default)s)"
 
 
 POSITIVE = _number(float, 0, strict=True)
@@ -485,8 +495,10 @@ def build_parser():
     p.add_argument("--version", action="version", version=f"invface {__version__}")
     p.add_argument("--debug", action="store_true", help="show tracebacks and native libraries' log lines "
                                                         "(also INVFACE_DEBUG=1)")
-    sub = p.add_subparsers(dest="command", required=True)
-    b = sub.add_parser("build-model", formatter_class=argparse.ArgumentDefaultsHelpFormatter, help="build (or inspect) a FaceModel bundle")
+    # every verb's help states its defaults
+    verb = functools.partial(argparse.ArgumentParser, formatter_class=_DefaultsHelp)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=verb)
+    b = sub.add_parser("build-model", help="build (or inspect) a FaceModel bundle")
     b.add_argument("input", nargs="?", help="an existing bundle to summarise/preview")
     b.add_argument("--template", action="store_true", help="the built-in template head (default)")
     b.add_argument("--neutral", help="the actor's neutral scan (OBJ/PLY) to morph the template onto")
@@ -502,7 +514,7 @@ def build_parser():
     b.add_argument("-o", "--output", help="write the bundle here (.npz)")
     b.add_argument("--preview", metavar="DIR", help="write preview images into DIR")
     b.set_defaults(func=cmd_build_model)
-    s = sub.add_parser("simulate", formatter_class=argparse.ArgumentDefaultsHelpFormatter, help="pose the model by muscle activations or blendshape-driven tracks "
+    s = sub.add_parser("simulate", help="pose the model by muscle activations or blendshape-driven tracks "
                                         "(quasistatic simulation)")
     s.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
     s.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model")
@@ -514,7 +526,7 @@ def build_parser():
     s.add_argument("-o", "--output", help="write the posed skin mesh (OBJ/PLY)")
     s.add_argument("--preview", help="write a PNG: neutral (top) and posed (bottom), front and 3/4")
     s.set_defaults(func=cmd_simulate)
-    c = sub.add_parser("calibrate", formatter_class=argparse.ArgumentDefaultsHelpFormatter, help="solve SH lighting and per-vertex albedo on a neutral plate (Eq. 14)")
+    c = sub.add_parser("calibrate", help="solve SH lighting and per-vertex albedo on a neutral plate (Eq. 14)")
     c.add_argument("plate", help="plate image (PNG/JPEG sRGB or linear EXR)")
     c.add_argument("--camera", help="JSON camera file (default: PLATE.json beside the plate, else the "
                                     "front view)")
@@ -532,7 +544,7 @@ def build_parser():
     c.add_argument("--max-iter", type=COUNT, default=30, help="Gauss-Newton iterations at most")
     c.add_argument("-o", "--output", default="calib.npz", help="calibration file to write (.npz)")
     c.set_defaults(func=cmd_calibrate)
-    fs = sub.add_parser("fit-scan", formatter_class=argparse.ArgumentDefaultsHelpFormatter, help="fit controls and rigid pose to a 3D scan (Eq. 13)")
+    fs = sub.add_parser("fit-scan", help="fit controls and rigid pose to a 3D scan (Eq. 13)")
     fs.add_argument("scan", help="scan mesh (OBJ/PLY, model frame: +Y up, face along +Z)")
     fs.add_argument("--unit", choices=["m", "cm", "mm"], help="the scan's unit (default: found from its size)")
     fs.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
@@ -544,7 +556,7 @@ def build_parser():
     fs.add_argument("--max-iter", type=COUNT, default=50, help="dogleg iterations at most (per round)")
     fs.add_argument("-o", "--output", default="reports/fit-scan", help="output folder")
     fs.set_defaults(func=cmd_fit_scan)
-    fp = sub.add_parser("fit-plate", formatter_class=argparse.ArgumentDefaultsHelpFormatter, help="fit controls and pose to a film plate: curves (Eq. 15), then "
+    fp = sub.add_parser("fit-plate", help="fit controls and pose to a film plate: curves (Eq. 15), then "
                                           "shape from shading (Eq. 16); a folder is a sequence")
     fp.add_argument("plate", help="plate image (PNG/JPEG/EXR), a video (MP4/MOV/AVI/MKV) or a folder of frames: "
                                   "a sequence, each frame warm-started from the one before")
@@ -595,25 +607,25 @@ def build_parser():
                          "inputs otherwise resumes it, skipping the frames already fitted)")
     fp.add_argument("-o", "--output", help="report folder (default reports/fit-plate/PLATE)")
     fp.set_defaults(func=cmd_fit_plate)
-    rp = sub.add_parser("report", formatter_class=argparse.ArgumentDefaultsHelpFormatter, help="(re)write the HTML report of a fit folder")
+    rp = sub.add_parser("report", help="(re)write the HTML report of a fit folder")
     rp.add_argument("run", help="folder with fit.json (or sub-folders with one each)")
     rp.set_defaults(func=cmd_report)
-    ex = sub.add_parser("export", formatter_class=argparse.ArgumentDefaultsHelpFormatter, help="write an existing fit run's exports (the Live Link Face CSV of ARKit's "
+    ex = sub.add_parser("export", help="write an existing fit run's exports (the Live Link Face CSV of ARKit's "
                                        "52 controls per kind) into its folder")
     ex.add_argument("run", help="a fit-plate output folder")
     ex.add_argument("--format", default="csv", help="comma-separated formats: csv (arkit_<kind>.csv)")
     ex.add_argument("--fps", type=POSITIVE, help="the clip's frame rate for the timecodes (default: the run's, else 24)")
     ex.set_defaults(func=cmd_export)
-    cam = sub.add_parser("camera", formatter_class=argparse.ArgumentDefaultsHelpFormatter, help="camera tools")
-    camsub = cam.add_subparsers(dest="camera_command", required=True)
-    cc = camsub.add_parser("calibrate", formatter_class=argparse.ArgumentDefaultsHelpFormatter, help="intrinsics and distortion from checkerboard images (OpenCV)")
+    cam = sub.add_parser("camera", help="camera tools")
+    camsub = cam.add_subparsers(dest="camera_command", required=True, parser_class=verb)
+    cc = camsub.add_parser("calibrate", help="intrinsics and distortion from checkerboard images (OpenCV)")
     cc.add_argument("images", nargs="+", help="checkerboard photographs")
     cc.add_argument("--board", default="9x6", help="inner corners COLSxROWS (default 9x6)")
     cc.add_argument("--square", type=POSITIVE, default=0.025, help="square size in metres")
     cc.add_argument("--no-distortion", action="store_true", help="fit K only")
     cc.add_argument("-o", "--output", default="camera.json", help="JSON camera file to write")
     cc.set_defaults(func=cmd_camera_calibrate)
-    d = sub.add_parser("demo", formatter_class=argparse.ArgumentDefaultsHelpFormatter, help="run the main job on the built-in model")
+    d = sub.add_parser("demo", help="run the main job on the built-in model")
     d.add_argument("-o", "--out", "--output", dest="output", default="reports/demo", help="output folder")
     d.set_defaults(func=cmd_demo)
     return p

@@ -2,6 +2,7 @@
 an internal error is one line and exit 1 pointing to --debug, which shows the traceback; native
 libraries' log lines stay off the terminal unless debugging."""
 import os
+import re
 
 import pytest
 
@@ -94,6 +95,10 @@ def test_every_verbs_help_states_its_defaults(verb, capsys):
     assert cli.main([*verb, "--help"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("usage: invface") and ("(default:" in out or verb == ["report"]), out[:300]
+    for entry in re.split(r"\n(?=  -)", out):               # one option's help, its wrapped lines included
+        flat = " ".join(entry.split())
+        assert "(default: None)" not in flat and "(default: False)" not in flat, flat
+        assert flat.lower().count("default") <= 1, f"a default stated twice: {flat}"
 
 
 def test_a_fully_transparent_plate_is_refused_before_fitting(tmp_path, capsys):
