@@ -164,10 +164,11 @@ def export(run_dir, formats=("csv",), fps=None):
         if f not in EXPORT_FORMATS:
             raise InvfaceError(f"export format '{f}': use " + ", ".join(EXPORT_FORMATS))
     single = [k for k in ("blendshape", "simulation") if (run / k / "fit.json").is_file()]
-    frames = read_run(run).get("frames") or []            # a sequence's run.json lists its frames
+    record = read_run(run)
+    frames = record.get("frames") or []                   # a sequence's run.json lists its frames
     kinds = single or [k for k in ("blendshape", "simulation") if frames and any(run.glob(f"*/{k}/fit.json"))]
     if not kinds:
         raise InvfaceError(f"{run}: holds no fit (no <kind>/fit.json, nor a sequence's run.json with "
                            "<frame>/<kind>/fit.json): give a fit-plate output folder")
-    rate = fps or read_run(run).get("fps") or 24.0
+    rate = fps or record.get("fps") or 24.0
     return write_arkit_csv(run, kinds, rate, single=bool(single)) if "csv" in formats else []
