@@ -94,7 +94,6 @@ class FaceRenderer:
         self.params = mi.traverse(self.scene)
         self.params.keep(keep)
         self.sensor = self.scene.sensors()[0]
-        self._placed = None          # what ``place`` last put in the scene
         self.integrator = self.scene.integrator()
         if backplate is not None:
             self._backplate(np.asarray(backplate, np.float32))
@@ -154,16 +153,10 @@ class FaceRenderer:
 
     def place(self, x, parts_x=None, rotation=None, translation=None):
         """Put the skin at posed positions x (V,3) float32 m and the inner parts at parts_x
-        (their pose rotation, translation), for ray queries on the scene (no shading); the
-        scene is rebuilt only when they moved since the last ``place``."""
-        key = (np.asarray(x, np.float32).tobytes(), None if parts_x is None else np.asarray(parts_x, np.float32).tobytes(),
-               None if rotation is None else tuple(np.ravel(rotation)), None if translation is None else tuple(np.ravel(translation)))
-        if key == self._placed:
-            return
+        (their pose rotation, translation), for ray queries on the scene (no shading)."""
         self.params["face.vertex_positions"] = self.mi.Float(np.asarray(x, np.float32).ravel())
         self._place_parts(parts_x, np.zeros(27), rotation, translation)
         self.params.update()
-        self._placed = key
 
     def render(self, x, gamma, albedo, rotation=None, translation=None, seed=None, spp=None, parts_x=None):
         """TensorXf (H, W, 4): linear RGB + alpha, attached to every Dr.Jit input with grad.
@@ -173,7 +166,6 @@ class FaceRenderer:
         (P,3) m: the inner parts' positions in x's frame (``FaceModel.parts_positions``;
         default at rest), posed like x."""
         xr, rad = self.vertex_radiance(x, gamma, albedo, rotation, translation)
-        self._placed = None
         self.params["face.vertex_positions"] = xr
         self.params[f"face.{ATTRIBUTE}"] = rad
         self._place_parts(parts_x, gamma, rotation, translation)
@@ -201,7 +193,6 @@ class FaceRenderer:
             self.params["face.vertex_positions"] = xr
             self._place_parts(parts_x, np.zeros(27), rotation, translation)
             self.params.update()
-            self._placed = None
             w, h = self.camera.size
             k = int(samples)
             off = (np.arange(k) + 0.5) / k
