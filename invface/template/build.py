@@ -21,7 +21,7 @@ from .skull import skull_meshes
 from .shell import embed_fine, layer_radii, prism_tets
 from .surfaces import build_grids
 
-GENERATOR_VERSION = "3"     # 2: the inner parts (eyes, teeth, tongue, mouth lining); 3: the skull
+GENERATOR_VERSION = "4"     # 2: the inner parts; 3: the skull; 4: the ARKit shapes
 # Quality bounds every generated mesh must meet (checked at build time and in the tests).
 MIN_DIHEDRAL_DEG = 1.0
 MIN_RADIUS_RATIO = 0.005
@@ -70,7 +70,8 @@ def _lid_sides(skin):
 def generate(resolution=1.0, progress=None, expressions=True):
     """Build the template FaceModel. resolution scales the tet count (~35k at 1, ~350k at 10).
 
-    expressions: simulate the FACS-style expression blendshapes (template.expressions).
+    expressions: the ARKit blendshapes (template.arkit_shapes), the kinematic blinks and
+    their muscle-track precompute.
     """
     say = progress or (lambda msg: None)
     t0 = time.perf_counter()
@@ -137,8 +138,10 @@ def generate(resolution=1.0, progress=None, expressions=True):
     )
     if expressions:
         from ..sim.poisson import track_displacements
-        from .expressions import add_blinks, calibrate_activation_curves, simulate_blendshapes
-        simulate_blendshapes(model, progress=say)
+        from .arkit_shapes import add_arkit_shapes
+        from .expressions import add_blinks, calibrate_activation_curves
+        say("ARKit blendshapes (sculpted, carried from ICT-FaceKit)")
+        add_arkit_shapes(model)
         add_blinks(model, Vf_closed)
         say("muscle-track precompute (Poisson solves, Eq. 10-11)")
         model.track_displacements = track_displacements(model)
@@ -161,6 +164,7 @@ def cache_path(resolution=1.0, expressions=True) -> Path:
     files = sorted(Path(__file__).parent.glob("*.py")) + sorted((pkg / "mesh").glob("*.py"))
     if expressions:     # the blendshapes and track data depend on the simulator and the rig too
         files += sorted((pkg / "sim").glob("*.py")) + [pkg / "model" / "rig.py"]
+    files += sorted((Path(__file__).parent / "data").glob("*.npz"))
     src = b"".join(p.read_bytes() for p in files)
     key = hashlib.sha1(src + f"{GENERATOR_VERSION}:{float(resolution):.6g}:{expressions}".encode()).hexdigest()[:12]
     kind = "" if expressions else "-noexpr"

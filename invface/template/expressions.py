@@ -47,14 +47,14 @@ ACTION_UNITS = {
 # Each blink is the lids rotated back over the eyeball onto the closed slit they were opened
 # from (eyelids.open_lids), with the palpebral ring's activation recorded for Eq. 9's curve;
 # the simulation follows it through the palpebral tracks (Eq. 5).
-BLINKS = {"eyeBlink_L": ({"orbicularis_oculi_palpebralis": 0.8}, "L", None),
-          "eyeBlink_R": ({"orbicularis_oculi_palpebralis": 0.8}, "R", None)}
+BLINKS = {"eyeBlinkLeft": ({"orbicularis_oculi_palpebralis": 0.8}, "L", None),
+          "eyeBlinkRight": ({"orbicularis_oculi_palpebralis": 0.8}, "R", None)}
 
 
 def add_blinks(model, closed):
     """Append the BLINKS shapes to a model's blendshapes (in place): closed (V,3) m is the
-    render skin with the lids closed (before ``eyelids.open_lids``); eyeBlink_L moves the
-    vertices with x > 0 onto it, eyeBlink_R those with x < 0."""
+    render skin with the lids closed (before ``eyelids.open_lids``); eyeBlinkLeft moves the
+    vertices with x > 0 onto it, eyeBlinkRight those with x < 0."""
     x = model.neutral
     delta = np.asarray(closed, float) - x
     names, deltas, acts = [], [], []

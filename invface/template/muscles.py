@@ -37,6 +37,12 @@ MUSCLES = {
     "nasalis": ("pair", [(0.016, 0.000, 0.9), (0.010, 0.010, 0.5), (0.004, 0.019, 0.3)], 0.0045, False),
     "platysma": ("pair", [(0.048, -0.105, 0.4), (0.040, -0.075, 0.35), (0.029, -0.046, 0.3)], 0.012, False),
     "orbicularis_oris": ("M", "ring:0.0,-0.0345,0.031,0.0145,0.45", 0.0065, True),
+    # the lips' own part of the ring (pars marginalis), under the vermilion: it rolls and
+    # presses the lips (Bao et al. Fig. 6)
+    "orbicularis_oris_marginalis": ("M", "ring:0.0,-0.0345,0.0235,0.0055,0.25", 0.0045, True),
+    # from the incisor fossae of the maxilla and the mandible to the modiolus
+    "incisivus_labii_superioris": ("pair", [(0.010, -0.018, 0.9), (0.018, -0.026, 0.6), (0.025, -0.033, 0.35)], 0.0035, False),
+    "incisivus_labii_inferioris": ("pair", [(0.010, -0.052, 0.9), (0.018, -0.045, 0.6), (0.025, -0.038, 0.35)], 0.0035, False),
 }
 
 DEFAULT_ACTIVATION_CURVE = np.array([[0.5, 1.0], [1.0, 0.0], [1.5, 0.0]])
