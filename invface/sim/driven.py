@@ -23,6 +23,12 @@ from .quasistatic import SimResult, SimulationError, Simulator
 from .tracks import MuscleTracks, TrackState
 
 
+# track springs' stiffness over (shear modulus x mean edge length): stiff enough that the
+# flesh follows sculpted shapes that no activation of the model's muscles makes exactly
+# (bench/arkit_shapes.py), soft enough that contacts and the flesh's volume still act
+TRACK_STIFFNESS = 8.0
+
+
 @dataclass
 class DrivenResult:
     """A solved state: parameters p (K+6,), the track state (Eq. 7-9) and the SimResult."""
@@ -39,7 +45,8 @@ class DrivenResult:
 class DrivenSimulation:
     """x(w) by simulation for a FaceModel (parameters: the model's blendshapes, then the jaw).
 
-    track_stiffness: N/m per track vertex (default 2 x shear modulus x mean edge length);
+    track_stiffness: N/m per track vertex (default ``TRACK_STIFFNESS`` x shear modulus x mean
+    edge length);
     other arguments as ``Simulator``. The Poisson displacements come from the model's bundle
     (``track_displacements``) or are computed here when it has none.
     """
@@ -53,7 +60,7 @@ class DrivenSimulation:
         if dX is None or np.shape(dX) != (K, N, 3):
             dX = track_displacements(model)
         k = track_stiffness if track_stiffness is not None else \
-            2.0 * self.sim.material.shear_modulus * self.sim.edge_length
+            TRACK_STIFFNESS * self.sim.material.shear_modulus * self.sim.edge_length
         self.tracks = MuscleTracks(model, dX, self.sim.dof_of_vertex >= 0, k)
         self.parameter_names = list(model.blendshape_names) + JAW_NAMES
         self.n_blendshapes = K
