@@ -506,9 +506,11 @@ def build_parser():
     b.add_argument("--unit", choices=["m", "cm", "mm"],
                    help="the scan's unit (default: found from the face's size; a scan whose face fits no unit is "
                         "scaled to an adult face)")
-    b.add_argument("--expressions", choices=["simulate", "copy", "none"], default="simulate",
-                   help="without --blendshapes: simulate the template's action units on the new anatomy "
-                        "(default), copy the template's shapes, or none")
+    b.add_argument("--expressions", choices=["copy", "simulate", "none"], default="copy",
+                   help="without --blendshapes: carry the template's 51 ARKit shapes onto the actor (copy), "
+                        "simulate the template's older FACS-style action units on the new anatomy, or none. "
+                        "With --blendshapes named in ARKit's or ICT-FaceKit's style, the controls the folder "
+                        "lacks are filled from the template")
     b.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor (1 = ~35k tets)")
     b.add_argument("--force", action="store_true", help="regenerate instead of using the cache")
     b.add_argument("-o", "--output", help="write the bundle here (.npz)")

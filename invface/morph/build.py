@@ -30,6 +30,7 @@ from ..mesh.embedding import MLS
 from ..io.meshes import read_mesh
 from ..mesh.tets import locate_near, quality_summary
 from ..model.facemodel import FaceModel
+from ..model.arkit import arkit_name
 from .blendshapes import read_blendshapes, recognised
 from .jaw import split_jaw
 from .curves import curve_set
@@ -39,6 +40,7 @@ from .openings import (ACROSS, MAX_INNER_FRACTION, closed_seams, inner_surfaces,
                        opening_centres)
 from .surface import SurfacePoisson, morph_surface
 from .target import Target, clean, drop_faces
+from .transfer import carry_offsets
 from .units import settle_unit
 from .volume import carry_bone, carry_fibers, carry_points, carry_similar, inside_fraction, morph_volume
 
@@ -124,6 +126,29 @@ def adapt_identity(model, displacement, progress=None):
     return new
 
 
+def fill_from_template(model, template, names):
+    """Append to ``model`` (in place) the template's blendshapes for the ARKit controls that an
+    imported folder with ARKit-style names (``names``) lacks, carried onto the actor as
+    ``expressions="copy"`` carries them, with their paired jaws. Nothing for a folder with no
+    ARKit name (FACS units, a studio's own names). Returns the names filled (sorted)."""
+    covered = {arkit_name(n) or n for n in names}
+    if not any(arkit_name(n) for n in names):
+        return []
+    missing = [k for k, n in enumerate(template.blendshape_names) if n not in covered]
+    if not missing:
+        return []
+    add = carry_offsets(template.blendshapes[missing], template.neutral, model.neutral,
+                        face_vertices(template))[0]
+    filled = [template.blendshape_names[k] for k in missing]
+    model.blendshape_names = list(model.blendshape_names) + filled
+    model.blendshapes = np.concatenate([model.blendshapes, add])
+    tjaw = template.meta.get("blendshape_jaw", {})
+    model.meta["blendshape_jaw"] = {**model.meta.get("blendshape_jaw", {}),
+                                    **{n: list(tjaw.get(n, [0.0] * 6)) for n in filled}}
+    model.meta["filled_from_template"] = sorted(filled)
+    return sorted(filled)
+
+
 def face_vertices(model):
     """Skin vertex ids (k,) of the face: between the chin and 2 cm above the eye corners,
     within 1.5 cm outside the outer eye corners, in front of the ears (6 cm behind the nose
@@ -157,8 +182,10 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
     blendshapes: folder of OBJ/PLY files sharing the neutral's topology (optional).
     template: the template FaceModel (default: the built-in one at resolution 1).
     unit: 'm', 'cm' or 'mm' (default: found from the face, units.settle_unit).
-    expressions (without blendshapes): 'simulate' the template's action units on the new
-    anatomy, 'copy' the template's deltas, or 'none'.
+    expressions (without blendshapes): 'copy' the template's ARKit shapes onto the actor
+    (``transfer.carry_offsets``), 'simulate' the template's FACS-style action units
+    (``template.expressions.ACTION_UNITS``) on the new anatomy, or 'none'. With blendshapes
+    named in ARKit's style, the ARKit controls they lack are filled from the template.
     Raises BuildFailed (a MeshError naming the stage, with what was found) when a stage cannot
     go on.
     """
@@ -275,9 +302,14 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
         for n, js in jaw_split.items():
             say(f"{n}: jaw rotation {np.degrees(np.linalg.norm(js['jaw'][:3])):.1f} deg split out "
                 f"(mean offset {js['mean_before_mm']:.1f} -> {js['mean_after_mm']:.1f} mm)")
+        filled = fill_from_template(model, template, names)
+        if filled:
+            say(f"{len(filled)} ARKit controls the folder lacks filled from the template: {', '.join(filled)}")
     elif expressions == "copy" and len(template.blendshape_names):
+        say("carrying the template's blendshapes onto the actor")
         model.blendshape_names = list(template.blendshape_names)
-        model.blendshapes = template.blendshapes.copy()
+        model.blendshapes = carry_offsets(template.blendshapes, template.neutral, model.neutral,
+                                          face_vertices(template))[0]
         model.blendshape_activations = template.blendshape_activations
         model.meta["blendshape_jaw"] = dict(template.meta.get("blendshape_jaw", {}))
         model.muscles = [replace(m, activation_curve=t.activation_curve) for m, t in zip(model.muscles, template.muscles)]
@@ -313,7 +345,7 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
         "centerlines_inside": inside_fraction(model.rest_positions, model.tets,
                                              np.concatenate([m.centerline for m in model.muscles])),
         "blendshapes": {n: kinds.get(n) for n in model.blendshape_names} if blendshapes is not None else expressions,
-        "jaw_split": jaw_split,
+        "jaw_split": jaw_split, "filled_from_template": model.meta.get("filled_from_template", []),
     }
     model.meta = {**model.meta, "generator": "invface.morph", "source": str(target.name),
                   "template": {k: template.meta.get(k) for k in ("generator", "generator_version", "resolution")},

@@ -81,12 +81,13 @@ class ModelBuild:
         return lines
 
 
-def build_model(neutral=None, blendshapes=None, unit=None, expressions="simulate", resolution=1.0, force=False,
+def build_model(neutral=None, blendshapes=None, unit=None, expressions="copy", resolution=1.0, force=False,
                 progress=None):
     """An anatomical FaceModel: with ``neutral`` (an OBJ/PLY scan of the actor's neutral
     face) the template morphed onto it (paper 001; ``blendshapes``: a folder of the actor's
     shapes, ``unit``: "m", "cm" or "mm", default found from the scan; ``expressions``:
-    "simulate", "copy" or "none" without blendshapes); without it the built-in template at
+    "copy" (the template's ARKit shapes), "simulate" (its FACS-style action units) or "none",
+    without blendshapes); without it the built-in template at
     ``resolution`` (``force``: regenerate, not from the cache). progress: {"message": text}
     events. Returns a ModelBuild."""
     from .. import template
