@@ -6,12 +6,16 @@ and MetaHuman) names 52 controls, each a value in [0, 1]. Left and Right are the
 Face recording.
 
 A model's blendshapes reach ARKit by name:
-- a shape named with an ARKit name is that control;
+- a shape named with an ARKit name is that control: the built-in head's 51 shapes
+  (``template.arkit_shapes``) are named so;
 - ICT-FaceKit's style, ``mouthSmile_L`` / ``_R``, is ``mouthSmileLeft`` / ``Right``;
-- the built-in head's FACS-style names (``LEGACY``) map to one or two ARKit controls each:
-  ``lipCornerPull_L`` is mouthSmileLeft; ``browDown`` drives browDownLeft and browDownRight
-  (one to two); ``browInnerUp_L`` and ``_R`` together are ARKit's single browInnerUp (two to
-  one: its value is their mean). ``lipsPart`` has no ARKit twin and stays an extra.
+- the FACS-style names of the built-in head before its ARKit shapes (``LEGACY``; actor bundles
+  built then still carry them, and ``build-model --expressions simulate`` still makes them) map
+  to one or two ARKit controls each: ``lipCornerPull_L`` is mouthSmileLeft; ``browDown`` drives
+  browDownLeft and browDownRight (one to two); ``browInnerUp_L`` and ``_R`` together are ARKit's
+  single browInnerUp (two to one: its value is their mean). ``lipsPart`` has no ARKit twin: it
+  stays an extra on a model that has it, and a weight for it given to a model without it is
+  read as the lips' parting controls (``READ_AS``).
 
 The jaw is a bone with 6 DOF (``rig.JAW_NAMES``); four ARKit controls read it, 1.0 being the
 jaw's bound in that direction:
@@ -68,6 +72,11 @@ LEGACY = {
     "lipPress": ("mouthPressLeft", "mouthPressRight"),
     "eyeBlink_L": ("eyeBlinkLeft",), "eyeBlink_R": ("eyeBlinkRight",),
 }
+
+
+# old names with no ARKit twin, read on a model that lacks them as the controls that make the
+# same motion (lipsPart: the lower lip down and the upper lip up, on both sides)
+READ_AS = {"lipsPart": ("mouthLowerDownLeft", "mouthLowerDownRight", "mouthUpperUpLeft", "mouthUpperUpRight")}
 
 
 def arkit_name(name):
@@ -138,7 +147,7 @@ def translate(weights, names):
         if k in known:
             targets = [k]
         else:
-            targets = sorted({t for a in drives(k) for t in by_arkit.get(a, ())})
+            targets = sorted({t for a in drives(k) or READ_AS.get(k, ()) for t in by_arkit.get(a, ())})
         if not targets:
             raise ControlsError(f"unknown blendshape '{k}'; the model has: {', '.join(sorted(known)) or 'none'} "
                                 "(ARKit, ICT-style _L/_R and FACS-style names are accepted where they map)")
