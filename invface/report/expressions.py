@@ -5,15 +5,25 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import SimulationError
 from ..io.images import save_figure, write_display_image
 from ..render.preview import look_at_camera, render_meshes, to_srgb8
 from .preview import SKIN, VIEWS, parts_meshes
 
 
+# correctives that mean something only over another control: ARKit's mouthClose closes the
+# lips of an open jaw, and is shown over jawOpen 1.0
+SHOWN_OVER = {"mouthClose": "jawOpen"}
+
+
 def blendshape_pose(model, name):
-    """Controls that show blendshape ``name`` as simulated: weight 1 and its paired jaw."""
-    jaw = model.meta.get("blendshape_jaw", {}).get(name, [0.0] * 6)
-    return {"weights": {name: 1.0}, "jaw": jaw}
+    """Controls that show blendshape ``name`` as simulated: weight 1 and its paired jaw (over
+    ``SHOWN_OVER``'s control at 1 and its jaw, where the model has it)."""
+    jaws = model.meta.get("blendshape_jaw", {})
+    base = SHOWN_OVER.get(name)
+    if base in model.blendshape_names:
+        return {"weights": {base: 1.0, name: 1.0}, "jaw": jaws.get(base, [0.0] * 6)}
+    return {"weights": {name: 1.0}, "jaw": jaws.get(name, [0.0] * 6)}
 
 
 def view_tiles(model, x, size=256, spp=8, w=None):
@@ -43,10 +53,15 @@ def write_expression_sheet(model, path, size=256, spp=8, cols=6, progress=None, 
         if progress:
             progress(f"render {name}")
         w = None if name == "neutral" else blendshape_pose(model, name)
-        x = model.neutral if w is None else model.surface(w, kind=kind)
         ax = np.ravel(axes)[i]
+        title = name + (f" (over {SHOWN_OVER[name]})" if w and len(w["weights"]) > 1 else "")
+        try:
+            x = model.neutral if w is None else model.surface(w, kind=kind)
+        except SimulationError:
+            ax.set_title(f"{title}: no equilibrium", fontsize=9)
+            continue
         ax.imshow(np.concatenate(view_tiles(model, x, size, spp, w), 1))
-        ax.set_title(name, fontsize=9)
+        ax.set_title(title, fontsize=9)
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
