@@ -139,19 +139,21 @@ class Sensitivity:
         return self.gradient(self.ds.W.T @ np.asarray(gx, float))
 
 
-def cold_finite_differences(driven, p, gx, rtol=1e-10):
+def cold_finite_differences(driven, p, gx, rtol=1e-10, indices=None):
     """Finite differences (P,) of L(p) = sum(gx * surface(p)) for gx (V,3), every solve from
     rest (the check of ``surface_vjp``): steps 1e-4 for the weights, 1e-5 rad
     for the jaw rotations, 1e-6 m for its translations. Central, but one-sided (second order,
     into the box, steps of 1e-5) for a weight at its lower bound 0, where the activations
-    have their break (the derivative the adjoint gives there is the one into the box)."""
+    have their break (the derivative the adjoint gives there is the one into the box).
+    ``indices``: only these parameters (the others are 0 in the result)."""
     vec = FitVector(driven.model.blendshape_names)
     steps = np.full(vec.P, 1e-4)
     steps[vec.jaw] = [1e-5, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6]
     L = lambda q: np.sum(gx * driven.surface_of(driven.solve(q, warm=None, rtol=rtol)))
     fd = np.zeros(vec.P)
     L0 = None
-    for i, h in enumerate(steps):
+    for i in range(vec.P) if indices is None else indices:
+        h = steps[i]
         e = np.zeros_like(p)
         e[i] = h
         if i < vec.K and p[i] == 0.0:       # a tenth of the step: the curvature is high there
