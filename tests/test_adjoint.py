@@ -37,7 +37,7 @@ def test_poisson_precompute_is_the_exact_poisson_solution_and_linear(small_expre
     assert not np.isin(pt.ids, m.fixed_cranium).any() and not np.isin(pt.ids, m.fixed_jaw).any()
 
 
-@pytest.mark.parametrize("shape", ["lowerLipDepress", "lipsPart", "upperLipRaise"])
+@pytest.mark.parametrize("shape", ["mouthLowerDownLeft", "mouthRollLower", "mouthUpperUpLeft"])
 def test_poisson_field_carries_each_lip_with_its_own_shape(small_expressive_model, shape):
     """The lips meet at the slit at rest, so a lip's slit and contact-face vertices lie on the
     other lip's skin too. Their Dirichlet data must be their own lip's: before, on this head, the
@@ -50,7 +50,7 @@ def test_poisson_field_carries_each_lip_with_its_own_shape(small_expressive_mode
         i = np.asarray(m.curves[curve])
         moved = np.linalg.norm(m.blendshapes[k][i], axis=1).mean()
         err = np.linalg.norm(field[i] - m.blendshapes[k][i], axis=1).mean()
-        assert err < 0.05 * moved + 1e-4, (curve, err, moved)
+        assert err < 0.05 * moved + 2e-4, (curve, err, moved)
 
 
 def test_zero_controls_give_the_rest_pose(driven):
@@ -62,21 +62,21 @@ def test_zero_controls_give_the_rest_pose(driven):
 
 def test_driven_smile_follows_the_blendshape_and_recovers_activations(driven):
     m = driven.model
-    k = m.blendshape_names.index("lipCornerPull_L")
+    k = m.blendshape_names.index("mouthSmileLeft")
     p = np.zeros(len(driven.parameter_names))
     p[k] = 1.0
     r = driven.solve(p, warm=None)
-    x_sim, x_bs = driven.surface_of(r), m.surface({"lipCornerPull_L": 1.0})
+    x_sim, x_bs = driven.surface_of(r), m.surface({"mouthSmileLeft": 1.0})
     err = np.linalg.norm(x_sim - x_bs, axis=1)
     moved = np.linalg.norm(x_bs - m.neutral, axis=1).max()
-    assert moved > 0.005 and err.mean() < 0.02 * moved and err.max() < 0.6 * moved
+    assert moved > 0.005 and err.mean() < 0.03 * moved and err.max() < 0.6 * moved
     i = m.muscle_names.index("zygomaticus_major_L")
-    assert abs(r.tracks.activations[i] - m.blendshape_activations[k, i]) < 0.1
+    assert abs(r.tracks.activations[i] - m.blendshape_activations[k, i]) < 0.2    # one curve for all shapes
     assert r.tracks.activations[m.muscle_names.index("zygomaticus_major_R")] < 0.05
 
 
 def _state(driven):
-    p = driven.model.parameters({"weights": {"lipCornerPull_L": 0.6, "browInnerUp_R": 0.5, "lipPucker": 0.3},
+    p = driven.model.parameters({"weights": {"mouthSmileLeft": 0.6, "browInnerUp": 0.5, "mouthPucker": 0.3},
                                  "jaw": [0.06, 0.01, -0.01, 0.0005, -0.0003, 0.0004]})
     return p, driven.solve(p, warm=None, rtol=1e-10)
 
@@ -91,7 +91,7 @@ def test_tangent_adjoint_and_finite_differences_agree(driven):
     g_tan = np.einsum("pni,ni->p", dX, gX)
     assert np.abs(g_adj - g_tan).max() <= 1e-8 * np.abs(g_adj).max()
     names = driven.parameter_names
-    checks = [("lipCornerPull_L", 1e-4), ("lipPucker", 1e-4), ("jaw_rx", 1e-5), ("jaw_ry", 1e-5),
+    checks = [("mouthSmileLeft", 1e-4), ("mouthPucker", 1e-4), ("jaw_rx", 1e-5), ("jaw_ry", 1e-5),
               ("jaw_tz", 1e-6)]
     for name, h in checks:
         i = names.index(name)
@@ -108,17 +108,16 @@ def test_tangent_adjoint_and_finite_differences_agree(driven):
 
 def test_adjoint_matches_cold_finite_differences_with_contacts_acting(small_expressive_model):
     """Issue 25: the surface is a function of the controls alone, and surface_vjp is its
-    derivative. At a puckered, pressed mouth with the jaw closing onto the lips (flesh-flesh
+    derivative. At a puckered mouth, the lower lip rolled in, with the jaw closing onto the lips (flesh-flesh
     and lip-on-jaw contacts acting), the adjoint of L(p) = sum(g * surface(p)) matches
     central differences of solves that each start from rest, on every control (relative
     error <= 1e-3), and a warm solve reaches the cold solve's surface."""
     m = small_expressive_model
     ds = DrivenSimulation(m)
-    # (with browInnerUp_L at 0.2 frontalis_lateralis_R was lengthened by 5.5e-7 with its own
-    # control at 0, so its activation's break lay inside the one-sided differences' steps of
-    # browOuterUp_R: 1.5e-3; at 0.3 it is shortened by 7.9e-7 and active, 7.1e-4)
-    p = m.parameters({"weights": {"lipPucker": 0.5, "lipPress": 0.3, "lipCornerPull_L": 0.3,
-                                  "browInnerUp_L": 0.3},
+    # (browInnerUp at 0.3, not 0.2: a muscle at its activation's break inside the one-sided
+    # differences' steps of another control spoils them)
+    p = m.parameters({"weights": {"mouthRollLower": 0.8, "mouthPucker": 0.3, "mouthSmileLeft": 0.3,
+                                  "browInnerUp": 0.3},
                       "jaw": [-0.04, 0.02, -0.01, 0.0005, -0.0004, 0.0003]})
     r = ds.solve(p, warm=None, rtol=1e-10)
     c, jm = ds.sim.contacts.of(TriangleContacts), m.jaw_matrix(ds.split(p)[1])
@@ -143,7 +142,7 @@ def test_a_point_solved_before_is_solved_again_from_rest_when_the_warm_start_fai
     point never solved is not retried: the fit rejects that trial."""
     from invface.errors import SimulationError
     ds = DrivenSimulation(small_expressive_model)
-    p = [small_expressive_model.parameters({"lipCornerPull_L": v}) for v in (0.5, 0.8, 0.65)]
+    p = [small_expressive_model.parameters({"mouthSmileLeft": v}) for v in (0.5, 0.8, 0.65)]
     accepted = ds.result_at(p[0])
     ds.result_at(p[1])                                          # a rejected trial
     calls, real = [], ds.sim.solve
@@ -207,7 +206,7 @@ def test_surface_models_share_one_interface_and_the_bridge_matches_the_adjoint(s
     rng = np.random.default_rng(2)
     for kind in ("blendshape", "simulation"):
         sm = m.surface_model(kind)
-        p0 = m.parameters({"lipCornerPull_L": 0.5, "jaw": [0.04, 0, 0, 0, 0, 0]})
+        p0 = m.parameters({"mouthSmileLeft": 0.5, "jaw": [0.04, 0, 0, 0, 0, 0]})
         x = sm.surface(p0)
         assert x.shape == m.neutral.shape
         gx = rng.standard_normal(x.shape)
@@ -229,15 +228,15 @@ def test_surface_models_share_one_interface_and_the_bridge_matches_the_adjoint(s
         fwd = np.array(dr.forward_to(flat2)).reshape(-1, 3)
         assert np.abs(fwd - J[0]).max() <= 1e-5 * np.abs(J[0]).max() + 1e-12, kind
     bs = m.surface_model("blendshape")
-    p0 = m.parameters({"lipCornerPull_L": 0.5, "jaw": [0.1, 0.02, 0, 0.001, 0, 0]})
+    p0 = m.parameters({"mouthSmileLeft": 0.5, "jaw": [0.1, 0.02, 0, 0.001, 0, 0]})
     J = bs.surface_jacobian(p0)
     for i in (0, len(p0) - 6, len(p0) - 5, len(p0) - 3):
         e = np.zeros_like(p0)
         e[i] = 1e-6
         fd = (bs.surface(p0 + e) - bs.surface(p0 - e)) / 2e-6
         assert np.abs(fd - J[i]).max() <= 1e-6 * np.abs(J[i]).max()
-    assert np.allclose(m.surface({"lipCornerPull_L": 0.5}, kind="simulation"),
-                       m.surface_model("simulation").surface(m.parameters({"lipCornerPull_L": 0.5})))
+    assert np.allclose(m.surface({"mouthSmileLeft": 0.5}, kind="simulation"),
+                       m.surface_model("simulation").surface(m.parameters({"mouthSmileLeft": 0.5})))
 
 
 def test_posed_bridge_is_one_adjoint_product_of_the_pose_and_the_model(small_expressive_model):
@@ -250,7 +249,7 @@ def test_posed_bridge_is_one_adjoint_product_of_the_pose_and_the_model(small_exp
     from invface.model import FitVector
     m = small_expressive_model
     vec = FitVector.of(m)
-    z0 = vec.from_dict({"weights": {"lipCornerPull_L": 0.4}, "jaw": [0.04, 0, 0, 0, 0, 0],
+    z0 = vec.from_dict({"weights": {"mouthSmileLeft": 0.4}, "jaw": [0.04, 0, 0, 0, 0, 0],
                         "rotation": [0.05, -0.1, 0.02], "translation": [0.002, 0.0, -0.001]})
     gx = np.random.default_rng(4).standard_normal(m.neutral.shape)
     for kind in ("blendshape", "simulation"):
@@ -272,7 +271,7 @@ def test_posed_bridge_is_one_adjoint_product_of_the_pose_and_the_model(small_exp
         dz[vec.names.index("rotation_y")] = 1.0
         dr.set_grad(z2, Float(dz.astype(np.float32)))
         np.testing.assert_allclose(np.array(dr.forward_to(out)).reshape(-1, 3), J[vec.names.index("rotation_y")], atol=1e-6)
-    for i in map(vec.names.index, ("lipCornerPull_L", "jaw_rx", "rotation_y", "translation_z")):
+    for i in map(vec.names.index, ("mouthSmileLeft", "jaw_rx", "rotation_y", "translation_z")):
         e = np.zeros_like(z0)
         e[i] = 1e-6
         rig = m.surface_model("blendshape")

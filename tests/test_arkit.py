@@ -1,5 +1,6 @@
-"""ARKit's 52 controls (model.arkit): names, the map from the built-in head's FACS-style controls
-and the jaw, aliases in both directions, and the arkit dict every fit.json carries."""
+"""ARKit's 52 controls (model.arkit): names, the built-in head's ARKit controls and the jaw, the
+map from the older FACS-style controls, aliases in both directions, and the arkit dict every
+fit.json carries."""
 import numpy as np
 import pytest
 
@@ -29,36 +30,53 @@ def test_names_are_read_in_every_style():
 def test_values_of_the_built_in_heads_controls_and_jaw(small_expressive_model):
     m = small_expressive_model
     vec = FitVector.of(m)
-    p = m.parameters({"weights": {"lipCornerPull_L": 0.7, "browInnerUp_L": 0.4, "browDown": 0.5, "lipsPart": 0.9},
+    p = m.parameters({"weights": {"mouthSmileLeft": 0.7, "browInnerUp": 0.4, "mouthRollLower": 0.9,
+                                  "jawOpen": 0.8},
                       "jaw": [0.3, 0.05, 0.0, 0.004, 0.0, -0.002]})
     a = arkit_values(m.blendshape_names, p[vec.weights], p[vec.jaw])
     assert list(a) == list(ARKIT_NAMES) and all(0.0 <= v <= 1.0 for v in a.values())
-    assert a["mouthSmileLeft"] == 0.7 and a["mouthSmileRight"] == 0.0
-    assert a["browInnerUp"] == pytest.approx(0.2)                 # the mean of its two halves
-    assert a["browDownLeft"] == a["browDownRight"] == 0.5
+    assert a["mouthSmileLeft"] == 0.7 and a["mouthSmileRight"] == 0.0 and a["mouthRollLower"] == 0.9
+    assert a["browInnerUp"] == pytest.approx(0.4)
+    # the jaw's four read the jaw bone, whatever the weight of the soft tissue's jawOpen shape
     assert a["jawOpen"] == pytest.approx(0.3 / JAW_UPPER[0]) and a["jawLeft"] == pytest.approx(0.004 / 0.008)
     assert a["jawRight"] == 0.0 and a["jawForward"] == 0.0          # clipped at 0: it moved back
     missing = unsupported(m.blendshape_names)
-    assert {"tongueOut", "eyeLookInLeft", "mouthRollLower", "cheekPuff"} <= set(missing)
-    assert not {"mouthSmileLeft", "jawOpen", "browInnerUp", "eyeBlinkRight"} & set(missing)
+    assert missing == ["tongueOut"]
     d = vec.to_dict(p.tolist() + [0.0] * 6)
     assert d["arkit"] == a and d["arkit_unsupported"] == missing
+
+
+def test_values_of_an_actor_built_with_the_old_facs_style_controls():
+    """A bundle built before the ARKit shapes (or with --expressions simulate) speaks ARKit
+    through LEGACY: one to one, one to two, two to one, and lipsPart as an extra."""
+    names = list(LEGACY) + ["lipsPart", "jawOpen"]
+    w = np.zeros(len(names))
+    for n, v in {"lipCornerPull_L": 0.7, "browInnerUp_L": 0.4, "browDown": 0.5, "lipsPart": 0.9}.items():
+        w[names.index(n)] = v
+    a = arkit_values(names, w, np.zeros(6))
+    assert a["mouthSmileLeft"] == 0.7 and a["browInnerUp"] == pytest.approx(0.2)     # the mean of its halves
+    assert a["browDownLeft"] == a["browDownRight"] == 0.5
+    assert a["mouthLowerDownLeft"] == 0.0                       # lipsPart stays an extra
+    assert {"tongueOut", "eyeLookInLeft", "mouthRollLower", "cheekPuff"} <= set(unsupported(names))
 
 
 def test_aliases_in_both_directions(small_expressive_model):
     m = small_expressive_model
     assert np.array_equal(m.parameters({"mouthSmileLeft": 0.7, "browInnerUp": 0.4}),
                           m.parameters({"lipCornerPull_L": 0.7, "browInnerUp_L": 0.4, "browInnerUp_R": 0.4}))
-    assert translate({"browDownLeft": 0.6, "browDownRight": 0.2}, m.blendshape_names) == {"browDown": pytest.approx(0.4)}
-    assert translate({"mouthSmile_L": 0.5}, m.blendshape_names) == {"lipCornerPull_L": 0.5}
-    # an ARKit-named model reads the built-in head's (old fit.json) names
-    ark = list(ARKIT_NAMES)
-    assert translate({"lipCornerPull_R": 0.3, "browDown": 0.5, "browInnerUp_L": 0.2, "browInnerUp_R": 0.4}, ark) == {
-        "mouthSmileRight": 0.3, "browDownLeft": 0.5, "browDownRight": 0.5, "browInnerUp": pytest.approx(0.3)}
+    assert translate({"mouthSmile_L": 0.5}, m.blendshape_names) == {"mouthSmileLeft": 0.5}
+    # a model with the old names reads ARKit's
+    old = list(LEGACY)
+    assert translate({"browDownLeft": 0.6, "browDownRight": 0.2}, old) == {"browDown": pytest.approx(0.4)}
+    assert translate({"mouthSmile_L": 0.5}, old) == {"lipCornerPull_L": 0.5}
+    # the ARKit-named head reads the old names (old fit.json files)
+    assert translate({"lipCornerPull_R": 0.3, "browDown": 0.5, "browInnerUp_L": 0.2, "browInnerUp_R": 0.4},
+                     m.blendshape_names) == {"mouthSmileRight": 0.3, "browDownLeft": 0.5, "browDownRight": 0.5,
+                                             "browInnerUp": pytest.approx(0.3)}
     with pytest.raises(ControlsError, match="unknown blendshape 'smile'.*ARKit"):
         m.parameters({"smile": 1.0})
-    with pytest.raises(ControlsError, match="unknown blendshape 'jawLeft'"):     # a jaw DOF, not a shape
-        m.parameters({"jawLeft": 1.0})
+    with pytest.raises(ControlsError, match="unknown blendshape 'jawLeft'"):     # a jaw DOF there, not a shape
+        translate({"jawLeft": 1.0}, old)
 
 
 def test_a_sequences_curves_carry_the_arkit_columns():

@@ -103,13 +103,13 @@ def test_fit_scan_command(small_expressive_model, tmp_path):
     import json
     import trimesh
     m = small_expressive_model
-    x = m.surface({"lipCornerPull_L": 0.6, "jaw": [0.05, 0, 0, 0, 0, 0]})
+    x = m.surface({"mouthSmileLeft": 0.6, "jaw": [0.05, 0, 0, 0, 0, 0]})
     trimesh.Trimesh(x, m.triangles, process=False).export(tmp_path / "scan.ply")
     r = run("fit-scan", str(tmp_path / "scan.ply"), "--resolution", str(SMALL_RESOLUTION),
             "--lam", "1e-8", "-o", str(tmp_path / "out"))
     assert r.returncode == 0, r.stderr
     fit = json.loads((tmp_path / "out" / "fit.json").read_text())
-    assert abs(fit["weights"]["lipCornerPull_L"] - 0.6) < 1e-3 and fit["error_mm"]["max"] < 0.01
+    assert abs(fit["weights"]["mouthSmileLeft"] - 0.6) < 1e-3 and fit["error_mm"]["max"] < 0.01
     assert (tmp_path / "out" / "fitted.ply").exists()
     assert fit["scan_unit"] == "m" and "scan unit: m (found from its size)" in r.stdout
     # the same scan in millimetres: found, said, and fitted as well (was 82 m off, exit 0)
@@ -165,7 +165,7 @@ def test_fit_plate_on_a_folder_fits_the_frames_and_writes_the_sequence_page(smal
             "--resolution", str(SMALL_RESOLUTION), "--iterations", "8", "--curve-lambda", "400", "-o", str(out))
     assert r.returncode == 0, r.stderr
     fits = {f: json.loads((out / f / "blendshape" / "fit.json").read_text()) for f in ("neutral", "smile_blendshape")}
-    w = {f: s["weights"]["lipCornerPull_L"] for f, s in fits.items()}
+    w = {f: s["weights"]["mouthSmileLeft"] for f, s in fits.items()}
     assert w["smile_blendshape"] > w["neutral"] + 0.2          # the truth: 0.7 and 0
     from invface.model.arkit import ARKIT_NAMES                 # every fit says it in ARKit too
     assert all(list(s["arkit"]) == list(ARKIT_NAMES) for s in fits.values())
@@ -203,12 +203,12 @@ def test_cli_simulate(small_expressive_model, tmp_path, capsys):
     assert main(["simulate", "--model", str(path), "--activations", str(bad)]) == 2
     assert "bad.json" in capsys.readouterr().err
     # blendshape-driven: weights drive the tracks, the activations are read out
-    rc = main(["simulate", "--model", str(path), "--weight", "lipCornerPull_L=1", "-o", str(tmp_path / "w.obj")])
+    rc = main(["simulate", "--model", str(path), "--weight", "mouthSmileLeft=1", "-o", str(tmp_path / "w.obj")])
     out = capsys.readouterr().out
     assert rc == 0 and "zygomaticus_major_L" in out and "converged" in out and (tmp_path / "w.obj").exists()
     assert main(["simulate", "--model", str(path), "--weight", "smile=1"]) == 2
     assert "unknown blendshape" in capsys.readouterr().err
-    assert main(["simulate", "--model", str(path), "--weight", "lipCornerPull_L=1", "--set", "mentalis_L=0.2"]) == 2
+    assert main(["simulate", "--model", str(path), "--weight", "mouthSmileLeft=1", "--set", "mentalis_L=0.2"]) == 2
 
 
 def test_cli_rejects_a_sphere(tmp_path, capsys):

@@ -73,7 +73,7 @@ def test_adjoint_through_the_plate_matches_cold_finite_differences(small_express
     rides the jaw: ``JawPlate.jaw_derivative`` is in the adjoint)."""
     m = small_expressive_model
     ds = DrivenSimulation(m, contact=False, contacts=[chin_plate(m, depth=2e-3)])
-    p = m.parameters({"weights": {"lipCornerPull_L": 0.4, "lipPucker": 0.3},
+    p = m.parameters({"weights": {"mouthSmileLeft": 0.4, "mouthPucker": 0.3},
                       "jaw": [0.05, 0.01, -0.01, 0.0004, -0.0003, 0.0002]})
     r = ds.solve(p, warm=None, rtol=1e-10)
     plate = ds.sim.contacts.of(JawPlate)
@@ -82,7 +82,7 @@ def test_adjoint_through_the_plate_matches_cold_finite_differences(small_express
     g = ds.surface_vjp(p, gx)
     L = lambda q: np.sum(gx * ds.surface_of(ds.solve(q, warm=None, rtol=1e-10)))
     names = ds.parameter_names
-    for name, h in [("lipCornerPull_L", 1e-4), ("lipPucker", 1e-4), ("jaw_rx", 1e-5), ("jaw_ry", 1e-5),
+    for name, h in [("mouthSmileLeft", 1e-4), ("mouthPucker", 1e-4), ("jaw_rx", 1e-5), ("jaw_ry", 1e-5),
                     ("jaw_tz", 1e-6)]:
         i = names.index(name)
         e = np.zeros_like(p)

@@ -15,7 +15,7 @@ from invface.render.jacobian import RasterJacobian
 from invface.render.renderer import FaceRenderer
 from invface.render.shading import vertex_radiance
 
-COLUMNS = ("lipCornerPull_L", "browInnerUp_L", "jawOpen", "jaw_rx", "rotation_y", "translation_x")
+COLUMNS = ("mouthSmileLeft", "browInnerUp", "jawOpen", "jaw_rx", "rotation_y", "translation_x")
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +23,7 @@ def scene(small_expressive_model):
     m = small_expressive_model
     cam = Camera.front_view(240, 180, eye=(0.0, 0.0, 0.62), target=(0.0, 0.0, 0.0))
     vec = FitVector.of(m)
-    p = m.parameters({"weights": {"lipCornerPull_L": 0.5, "browInnerUp_R": 0.4}, "jaw": [0.08, 0, 0, 0, 0, 0]})
+    p = m.parameters({"weights": {"mouthSmileLeft": 0.5, "browInnerUp": 0.4}, "jaw": [0.08, 0, 0, 0, 0, 0]})
     z = vec.pack(p, np.array([0.05, -0.15, 0.02]), np.array([0.002, -0.001, 0.01]))
     xr, J = posed_jacobian(m.surface_model("blendshape"), z, vec)
     cols = [vec.names.index(n) for n in COLUMNS]

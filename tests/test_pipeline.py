@@ -82,7 +82,7 @@ def _sim_scene(m):
     from invface.render.synthetic import render_plate, skin_albedo, studio_light
     cam = sample_camera(180, 135)
     vec = FitVector.of(m)
-    z = vec.from_dict({"weights": {"lipCornerPull_L": 0.5, "browInnerUp_L": 0.3}, "jaw": [0.03, 0, 0, 0, 0, 0],
+    z = vec.from_dict({"weights": {"mouthSmileLeft": 0.5, "browInnerUp": 0.3}, "jaw": [0.03, 0, 0, 0, 0, 0],
                        "rotation": [0.02, -0.05, 0.0], "translation": [0.001, 0.0, 0.002]})
     g, a = studio_light(), skin_albedo(m)
     p, rot, tr = vec.unpack(z)
@@ -153,9 +153,9 @@ def test_readme_from_python_script_runs(small_expressive_model, tmp_path):
         assert (tmp_path / "out" / f).is_file(), f
     sim = fit["simulation"]
     assert calib.pose is not None and calib.rms < 0.05, calib.rms
-    # the truth: lipCornerPull_L 0.7, _R 0.6, cheekRaise 0.3 (zygomaticus major active); two runs
+    # the truth: mouthSmileLeft 0.7, _R 0.6, cheekRaise 0.3 (zygomaticus major active); two runs
     # measured 0.35 + 0.25 and 0.40 + 0.25 (the fit trades some of it for dimpler)
-    assert sim.weights["lipCornerPull_L"] + sim.weights["lipCornerPull_R"] > 0.4, sim.weights
+    assert sim.weights["mouthSmileLeft"] + sim.weights["mouthSmileRight"] > 0.4, sim.weights
     assert sim.activations["zygomaticus_major_L"] > 0.05, sim.activations
     saved = json.loads((tmp_path / "out/smile/simulation/fit.json").read_text())
     assert saved["weights"] == sim.weights and saved["truth"]["median_mm"] == fit.truth["simulation"]["median_mm"]

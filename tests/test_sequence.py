@@ -116,12 +116,12 @@ def test_video_fit_is_killed_and_resumed_and_writes_curves_and_overlay(clip, tmp
         table = list(csv.DictReader(f))
     assert [int(t["frame"]) for t in table] == list(range(N_FRAMES)) and {t["kind"] for t in table} == {"blendshape"}
     fit3 = json.loads((out / "clip.frame_000003/blendshape/fit.json").read_text())
-    assert float(table[3]["weight_lipCornerPull_L"]) == pytest.approx(fit3["weights"]["lipCornerPull_L"])
+    assert float(table[3]["weight_mouthSmileLeft"]) == pytest.approx(fit3["weights"]["mouthSmileLeft"])
     assert float(table[3]["time"]) == pytest.approx(3 / 24)
     # each frame against its truth (clip.frame_NNNNNN.truth.json beside the video): curves only
     assert fit3["truth"]["shape_median_mm"] < 0.5 and fit3["curve_rms_px"] < 1.0
     curves = json.loads((out / "curves.json").read_text())["blendshape"]
-    assert len(curves["rows"]) == N_FRAMES and "weight_lipCornerPull_L" in curves["columns"]
+    assert len(curves["rows"]) == N_FRAMES and "weight_mouthSmileLeft" in curves["columns"]
     import cv2
     cap = cv2.VideoCapture(str(out / "overlay_blendshape.mp4"))
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == N_FRAMES and cap.get(cv2.CAP_PROP_FRAME_WIDTH) > 3 * 300
@@ -161,7 +161,7 @@ def test_two_process_local_cluster_matches_the_single_process_run(small_expressi
     m, cal = small_expressive_model, Calibration.load(root / "calib.npz")
     # the model travels to the workers pickled, also after its simulation was used (the
     # solver's native handles stay behind; the copy rebuilds its surface models)
-    p = m.parameters({"lipCornerPull_L": 0.3})
+    p = m.parameters({"mouthSmileLeft": 0.3})
     # (both solve from rest to the same tolerance -- the session model's warm start and
     # first-order prediction would land elsewhere within it; PARDISO's threaded reductions
     # leave them 1-2e-9 m apart in some test orders)

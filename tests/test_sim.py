@@ -422,7 +422,7 @@ def test_lids_slide_on_the_eyeballs(sim):
 
 
 def test_blink_closes_one_eye_in_both_models(small_expressive_model):
-    """eyeBlink_L closes the left fissure in the rig (the lids rotated back onto the slit) and
+    """eyeBlinkLeft closes the left fissure in the rig (the lids rotated back onto the slit) and
     the simulation follows it through the palpebral tracks; the right eye stays open.
     (Measured: the simulation closes the fissure from 9.9 to 4.0 mm on this small head, to
     1.6 mm on the default one.)"""
@@ -434,7 +434,7 @@ def test_blink_closes_one_eye_in_both_models(small_expressive_model):
 
     assert fissure(m.neutral, "L") > 0.008
     for kind, closed in (("blendshape", 1e-6), ("simulation", 0.005)):
-        x = m.surface({"eyeBlink_L": 1.0}, kind=kind)
+        x = m.surface({"eyeBlinkLeft": 1.0}, kind=kind)
         assert fissure(x, "L") < closed, (kind, fissure(x, "L"))
         assert fissure(x, "R") > 0.008, kind
 
@@ -466,41 +466,37 @@ def test_bad_rest_mesh(small_model):
         Simulator(nm)
 
 
-REQUIRED_UNITS = ["browInnerUp_L", "browInnerUp_R", "browOuterUp_L", "browOuterUp_R", "browDown", "cheekRaise",
-                  "noseWrinkle", "upperLipRaise", "lipCornerPull_L", "lipCornerPull_R", "dimpler",
-                  "lipCornerDepress_L", "lipCornerDepress_R", "lowerLipDepress", "chinRaise", "lipPucker",
-                  "lipFunnel", "lipStretch", "lipPress", "lipsPart", "jawOpen"]
-
-
 def test_template_expression_blendshapes(small_expressive_model):
+    """The template's ARKit shapes move what ARKit says they move, on the side it says (Left
+    is the actor's left, +X), each with the activations that calibrate its muscles' curves."""
     m = small_expressive_model
-    assert all(u in m.blendshape_names for u in REQUIRED_UNITS)
     K = len(m.blendshape_names)
     assert m.blendshapes.shape == (K, len(m.neutral), 3)
     assert m.blendshape_activations.shape == (K, len(m.muscles))
-    stats = m.meta["blendshape_sims"]
     for name in m.blendshape_names:
-        assert np.linalg.norm(m.blendshapes[m.blendshape_names.index(name)], axis=1).max() > 5e-4, name
-        if not stats[name].get("kinematic"):
-            assert abs(stats[name]["volume_change"]) < 0.01, name
+        assert np.linalg.norm(m.blendshapes[m.blendshape_names.index(name)], axis=1).max() > 1e-3, name
 
     def moved(name, landmark):
         k = m.blendshape_names.index(name)
         return m.blendshapes[k][m.landmarks[landmark]]
 
     # smile L lifts the left mouth corner more than the right one
-    assert moved("lipCornerPull_L", "mouth_corner_L")[1] > 0.001
-    assert moved("lipCornerPull_L", "mouth_corner_L")[1] > 3 * abs(moved("lipCornerPull_L", "mouth_corner_R")[1])
-    # the depressor pulls the corner down, the brow raiser lifts the brow
-    assert moved("lipCornerDepress_R", "mouth_corner_R")[1] < -0.0005
-    # (the forehead flesh is thin and bound to the cranium, so brows move little: see issue 3 note)
-    assert moved("browInnerUp_L", "brow_L")[1] > 1e-4
-    # lips part and jaw open separate the inner lips (with the paired jaw)
+    assert moved("mouthSmileLeft", "mouth_corner_L")[1] > 0.001
+    assert moved("mouthSmileLeft", "mouth_corner_L")[1] > 3 * abs(moved("mouthSmileLeft", "mouth_corner_R")[1])
+    # the frown pulls the corner down, the brow raiser lifts the brow; mouthLeft moves the mouth to +X
+    assert moved("mouthFrownRight", "mouth_corner_R")[1] < -0.0005
+    assert moved("browInnerUp", "brow_L")[1] > 1e-3
+    assert moved("mouthLeft", "mouth_corner_L")[0] > 0.003 and moved("mouthLeft", "mouth_corner_R")[0] > 0.003
+    # the zygomaticus major is what a smile engages, on its own side
+    zyg = [i for i, mu in enumerate(m.muscles) if mu.name == "zygomaticus_major_L"][0]
+    assert m.blendshape_activations[m.blendshape_names.index("mouthSmileLeft"), zyg] > 0.5
+    assert m.blendshape_activations[m.blendshape_names.index("mouthSmileRight"), zyg] == 0
+    # the lower lip's down and the jaw open separate the inner lips (with the paired jaw)
     from invface.report.expressions import blendshape_pose
-    for name in ("lipsPart", "jawOpen"):
+    for name in ("mouthLowerDownLeft", "jawOpen"):
         x = m.surface(blendshape_pose(m, name))
         gap = x[m.curves["lip_inner_upper"], 1].mean() - x[m.curves["lip_inner_lower"], 1].mean()
-        assert gap > 0.004, name
+        assert gap > 0.002, (name, gap)
 
 
 @pytest.mark.parametrize("contacts", [False, True])
