@@ -28,10 +28,10 @@ from ..errors import InvfaceError
 from ..io.jsonfile import read_object
 from ..mesh.sections import resample_even as resample
 from ..model.controls import FitVector
-from .dogleg import dogleg
+from .dogleg import dogleg, with_linear_term
 from .lambdas import EQ15_ANCHOR_LAMBDA, EQ15_LAMBDA_1, EQ15_TRACK_LAMBDA
 from ..model.pose import pose_points, posed_jacobian, posed_surface
-from .priors import prior_rows, regulariser, temporal_prior
+from .priors import prior_rows, regulariser, sparsity_slopes, temporal_prior
 
 PLATE_CURVES = ("lip_outer_upper", "lip_outer_lower", "lip_inner_upper", "lip_inner_lower",
                 "eye_L_upper", "eye_L_lower", "eye_R_upper", "eye_R_lower")
@@ -330,8 +330,8 @@ def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=N
         if not pose:
             lo_[vec.pose], hi_[vec.pose] = z[vec.pose], z[vec.pose]
         log = (lambda h: progress(dict(h, **{"pass": name}))) if progress else None
-        res = dogleg(CurveObjective(model, sm, camera, curves, lam, prior), z, lo_, hi_, max_iter=max_iter,
-                     ftol=CURVE_FTOL, progress=log)
+        fun = with_linear_term(CurveObjective(model, sm, camera, curves, lam, prior), sparsity_slopes(vec, lam))
+        res = dogleg(fun, z, lo_, hi_, max_iter=max_iter, ftol=CURVE_FTOL, progress=log)
         history.extend(dict(h, **{"pass": name}) for h in res.history)
         return res
 

@@ -134,6 +134,32 @@ def _box_dogleg_step(H, g, free, lo, hi, radius):
     return p_sd + tau * d
 
 
+class LinearTerm:
+    """NormalEquations ``ne`` plus the linear term c . x at x: cost + c . x, gradient + c, the
+    same H (an L1 penalty on variables bounded below by 0, where |x| = x)."""
+
+    def __init__(self, ne, c, x):
+        self.ne, self.c = ne, c
+        self.cost = ne.cost + float(c @ x)
+
+    @property
+    def gradient(self):
+        return self.ne.gradient + self.c
+
+    @property
+    def hessian(self):
+        return self.ne.hessian
+
+    def hessian_on(self, free):
+        return self.ne.hessian_on(free) if hasattr(self.ne, "hessian_on") else self.ne.hessian
+
+
+def with_linear_term(fun, c):
+    """``fun`` (as ``dogleg`` takes it) with c . x (c (n,)) added to its cost."""
+    c = np.asarray(c, float)
+    return lambda x: LinearTerm(_evaluate(fun, x), c, np.asarray(x, float))
+
+
 def _evaluate(fun, x):
     out = fun(x)
     return NormalEquations.from_residuals(*out) if isinstance(out, tuple) else out

@@ -5,6 +5,21 @@ from __future__ import annotations
 import numpy as np
 
 
+# The weights' L1 term: its slope is SPARSITY times the L2 regulariser's slope at weight 1 (so
+# a control moves off 0 only where the data pull on it is stronger than that). With 51 ARKit
+# controls an L2 prior alone lets the curves spread an expression, and the actor's identity,
+# over many of them; the L1 term keeps a fit to the few the image asks for (paper 000 Fig. 6).
+SPARSITY = 0.4
+
+
+def sparsity_slopes(vec, lam, kappa=SPARSITY):
+    """The L1 term's slopes c (vec.size,): kappa * lam on the blendshape weights (all >= 0),
+    0 on the jaw and the pose; the term is c . z (``dogleg.with_linear_term``)."""
+    c = np.zeros(vec.size)
+    c[vec.weights] = kappa * lam
+    return c
+
+
 def temporal_prior(vec, previous, temporal):
     """A sequence's temporal term |(z - previous) / scales|^2 times ``temporal``: (centre
     previous (size,), row weights sqrt(temporal) / ``vec.scales()`` (size,)) for

@@ -16,15 +16,18 @@ from .curves import PLATE_CURVES, curve_points, projection_jacobian, write_curve
 # name -> (model kind that makes it, blendshape weights, jaw (6,), head rotation, translation)
 SAMPLES = {
     "neutral": ("blendshape", {}, None, (0.03, -0.12, 0.0), (0.0, 0.0, 0.0)),
-    "smile_blendshape": ("blendshape", {"lipCornerPull_L": 0.7, "lipCornerPull_R": 0.6, "cheekRaise": 0.3},
+    "smile_blendshape": ("blendshape", {"mouthSmileLeft": 0.7, "mouthSmileRight": 0.6,
+                                          "cheekSquintLeft": 0.3, "cheekSquintRight": 0.3},
                          (0.03, 0, 0, 0, 0, 0), (0.04, -0.1, 0.01), (0.002, -0.001, 0.003)),
-    "brows_blendshape": ("blendshape", {"browInnerUp_L": 0.6, "browInnerUp_R": 0.6, "browOuterUp_L": 0.4},
+    "brows_blendshape": ("blendshape", {"browInnerUp": 0.6, "browOuterUpLeft": 0.4},
                          None, (-0.03, 0.08, 0.0), (-0.002, 0.002, 0.0)),
-    "smile_simulation": ("simulation", {"lipCornerPull_L": 0.7, "lipCornerPull_R": 0.6, "cheekRaise": 0.3},
+    "smile_simulation": ("simulation", {"mouthSmileLeft": 0.7, "mouthSmileRight": 0.6,
+                                          "cheekSquintLeft": 0.3, "cheekSquintRight": 0.3},
                          (0.03, 0, 0, 0, 0, 0), (0.04, -0.1, 0.01), (0.002, -0.001, 0.003)),
-    "pucker_simulation": ("simulation", {"lipPucker": 0.8}, None, (0.0, 0.1, -0.02), (0.0, 0.001, -0.002)),
-    "open_simulation": ("simulation", {"lipsPart": 0.5, "lowerLipDepress": 0.4}, (0.12, 0, 0, 0, 0, 0),
-                        (0.06, -0.05, 0.0), (0.0, 0.0, 0.0)),
+    "pucker_simulation": ("simulation", {"mouthPucker": 0.8}, None, (0.0, 0.1, -0.02), (0.0, 0.001, -0.002)),
+    "open_simulation": ("simulation", {"mouthLowerDownLeft": 0.4, "mouthLowerDownRight": 0.4,
+                                       "mouthUpperUpLeft": 0.25, "mouthUpperUpRight": 0.25},
+                        (0.12, 0, 0, 0, 0, 0), (0.06, -0.05, 0.0), (0.0, 0.0, 0.0)),
 }
 
 
@@ -82,8 +85,8 @@ def clip_controls(model, n, fps=24.0):
     out = []
     for s in t:
         phase = 2 * np.pi * s / max(n / fps, 1e-9)
-        w = {"lipCornerPull_L": 0.35 * (1 - np.cos(phase)), "lipCornerPull_R": 0.3 * (1 - np.cos(phase)),
-             "browInnerUp_L": 0.25 * (1 + np.sin(phase)), "browInnerUp_R": 0.25 * (1 + np.sin(phase))}
+        w = {"mouthSmileLeft": 0.35 * (1 - np.cos(phase)), "mouthSmileRight": 0.3 * (1 - np.cos(phase)),
+             "browInnerUp": 0.25 * (1 + np.sin(phase))}
         w = {k: float(v) for k, v in w.items() if k in names}
         jaw = np.array([0.04 * (1 - np.cos(2 * phase)), 0, 0, 0, 0, 0])
         rot = (0.03 * np.sin(phase), -0.12 * np.sin(phase + 0.5), 0.0)

@@ -59,7 +59,7 @@ from ..render.renderer import FaceRenderer
 from .curves import CurveObjective
 from .lambdas import EQ16_LAMBDA_1, EQ16_LAMBDA_2
 from ..model.pose import posed_jacobian, posed_parts, posed_surface
-from .priors import prior_rows, regulariser, temporal_prior
+from .priors import prior_rows, regulariser, sparsity_slopes, temporal_prior
 
 LEVELS = 3
 #: Huber threshold of the image rows (linear light, per pyramid sample and channel): about 10x
@@ -524,7 +524,7 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     ``render`` options go to ``ShadingObjective`` (spp, silhouette_spp, seed, jacobian,
     jacobian_samples, jacobian_spp, backplate: default the plate with the head filled in from its
     surroundings). Returns a ShadingFit."""
-    from .dogleg import dogleg
+    from .dogleg import dogleg, with_linear_term
     sm, vec = model.surface_model(kind), FitVector.of(model)
     z0 = vec.pack(p_hat if p0 is None else p0, rotation, translation)
     xr0 = posed_surface(sm, z0, vec)[1]
@@ -560,8 +560,8 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
                 raise
             log(ne.cost)
             return _ScaledEquations(ne, s)
-        res = dogleg(fun, z0 / s, lo / s, hi / s, max_iter=max_iter, radius=radius, ftol=ftol, min_radius=1e-2,
-                     adapt_curvature=True)
+        res = dogleg(with_linear_term(fun, sparsity_slopes(vec, lam2) * s), z0 / s, lo / s, hi / s,
+                     max_iter=max_iter, radius=radius, ftol=ftol, min_radius=1e-2, adapt_curvature=True)
         for h, step in zip(history[1:], res.history):       # the dogleg's verdict on each trial
             h.update(accepted=step["accepted"], rho=step["rho"], radius=step["radius"], mu=step["mu"])
         z, status = res.x * s, res.status
