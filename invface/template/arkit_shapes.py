@@ -17,7 +17,8 @@ palpebrae's) engage none.
 
 A template at another resolution takes the offsets by closest point on the stored skin. The
 closed mouth's slit has its upper and lower lips' vertices at the same points: there each
-side reads its own side's slit vertices.
+side reads its own side's slit vertices. The lids' offsets are bent onto the head's eyeballs
+(``slide_on_eyeballs``).
 """
 from __future__ import annotations
 
@@ -132,12 +133,34 @@ def activations(name, muscles):
     return a
 
 
+LID_REACH = 0.004      # m: skin this close to an eyeball's surface at rest slides on it
+
+
+def slide_on_eyeballs(neutral, deltas, centres, radius, reach=LID_REACH):
+    """Offsets (K,V,3) with the skin within ``reach`` of an eyeball (centres (E,3), ``radius``
+    m) kept at its rest distance from the eyeball's centre: the lids slide over the eyeball.
+    A carried lid offset is a straight line (ICT's eyeLookDown moves the upper lid 7.5 mm);
+    on this head's eyeball it would cut into the eye and show the iris through the lid."""
+    out = np.array(deltas, float)
+    for c in np.asarray(centres, float):
+        rest = np.linalg.norm(neutral - c, axis=1)
+        near = np.flatnonzero(rest < radius + reach)
+        if not len(near):
+            continue
+        p = neutral[near] + out[:, near] - c                      # (K, n, 3) from the centre
+        r = np.linalg.norm(p, axis=2, keepdims=True)
+        out[:, near] = c + p * (rest[near, None] / np.maximum(r, 1e-12)) - neutral[near]
+    return out
+
+
 def add_arkit_shapes(model, path=DATA):
     """Set a template FaceModel's blendshapes to the stored ARKit shapes (in place): names,
     blendshapes (K,V,3), blendshape_activations (K,M) and meta['blendshape_jaw'], leaving out
     ``KINEMATIC`` (made by ``expressions.add_blinks``). Returns the model."""
+    from .shape import EYE_CENTER, EYE_RADIUS
     shapes = load(path)
-    D = carry(shapes, model.neutral, model.triangles)
+    eyes = [EYE_CENTER * (sx, 1, 1) for sx in (1, -1)]
+    D = slide_on_eyeballs(model.neutral, carry(shapes, model.neutral, model.triangles), eyes, EYE_RADIUS)
     keep = [k for k, n in enumerate(shapes["names"]) if n not in KINEMATIC]
     names = [shapes["names"][k] for k in keep]
     model.blendshape_names = names

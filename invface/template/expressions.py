@@ -1,7 +1,10 @@
-"""The template's expression blendshapes, simulated from muscle activations (paper 000 Sec. 4).
+"""Expression blendshapes simulated from muscle activations (paper 000 Sec. 4), the head's
+kinematic blinks, and the activation-length curves' calibration.
 
-Each FACS-style action unit is a set of muscle activations (and, for jaw open, a jaw
-rotation). It is simulated with the quasistatic muscle model, the render skin is read off
+The built-in head's shapes are sculpted (``arkit_shapes``); its blinks are made here
+(``add_blinks``). ``ACTION_UNITS`` are the FACS-style units the head had before, simulated on
+an actor's own anatomy by ``build-model --expressions simulate``. Each is a set of muscle
+activations (and, for jaw open, a jaw rotation). It is simulated with the quasistatic muscle model, the render skin is read off
 the flesh through the embedding, and the blendshape delta is the pre-skinning displacement:
 for shapes with a jaw rotation the jaw's linear blend skinning is undone per vertex, so that
 Eq. 1 with the same jaw parameters and weight 1 reproduces the simulated skin exactly.
