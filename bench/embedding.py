@@ -35,7 +35,7 @@ def main():
     X0, T, V = model.rest_positions, model.tets, len(model.neutral)
     args = (X0, T, model.neutral, model.embed_tets, model.embed_weights, MLS["rings"], MLS["radius"])
     ds = DrivenSimulation(model)
-    p = model.parameters({"weights": {"lipCornerPull_L": 0.6, "jawOpen": 0.5},
+    p = model.parameters({"weights": {"mouthSmileLeft": 0.6, "jawOpen": 0.5},
                           "jaw": np.array(model.meta["blendshape_jaw"]["jawOpen"]) * 0.5})
     _, solve = timed(lambda: ds.solve(p, warm=None))
     dX, tangent = timed(lambda: ds.sensitivity(p).tangent())

@@ -4,7 +4,7 @@ ring alone, and the lids' sliding contact.
     python bench/eyes.py [--resolution 1]
 
 Prints the fissure height (mm, between the middles of the eye_L lid curves) at rest, with
-eyeBlink_L at 0.5 and 1 in the rig and in the simulation (and the right eye's in the
+eyeBlinkLeft at 0.5 and 1 in the rig and in the simulation (and the right eye's in the
 simulation), with the palpebral orbicularis alone at full activation (no tracks), and how many
 lid vertices slide on the eyeballs.
 """
@@ -27,10 +27,10 @@ def main(resolution):
     m = invface.template.build(resolution=resolution)
     print(f"resolution {resolution}: fissure at rest {fissure(m, m.neutral):.2f} mm")
     for w in (0.5, 1.0):
-        rig = m.surface({"eyeBlink_L": w}, kind="blendshape")
+        rig = m.surface({"eyeBlinkLeft": w}, kind="blendshape")
         t = time.perf_counter()
-        sim = m.surface({"eyeBlink_L": w}, kind="simulation")
-        print(f"  eyeBlink_L {w}: rig {fissure(m, rig):.2f} mm, simulation {fissure(m, sim):.2f} mm "
+        sim = m.surface({"eyeBlinkLeft": w}, kind="simulation")
+        print(f"  eyeBlinkLeft {w}: rig {fissure(m, rig):.2f} mm, simulation {fissure(m, sim):.2f} mm "
               f"({time.perf_counter() - t:.1f} s), right eye {fissure(m, sim, 'R'):.2f} mm")
     s = Simulator(m)
     a = np.zeros(len(s.muscle_names))

@@ -10,7 +10,7 @@ gradient for a model with twice as many blendshapes, to show that its cost does 
 
 ``--fd`` checks the adjoint instead (issue 25): the gradient of L(p) = sum(g * surface(p))
 (random g) against central differences of solves that each start from rest, on every control,
-at lipCornerPull_L 0.3, lipPucker 0.3, browInnerUp_L 0.2, jaw opened 0.05 rad (contacts on);
+at mouthSmileLeft 0.3, mouthPucker 0.3, browInnerUp 0.2, jaw opened 0.05 rad (contacts on);
 then the same controls solved warm from other states, against the cold surface.
 """
 import argparse
@@ -30,8 +30,8 @@ from invface.sim.poisson import track_displacements
 def controls(ds):
     names = ds.parameter_names
     p = np.zeros(len(names))
-    for n, v in (("lipCornerPull_L", 0.7), ("lipCornerPull_R", 0.6), ("browInnerUp_L", 0.5),
-                 ("cheekRaise", 0.4), ("jaw_rx", 0.08)):
+    for n, v in (("mouthSmileLeft", 0.7), ("mouthSmileRight", 0.6), ("browInnerUp", 0.5),
+                 ("cheekSquintLeft", 0.4), ("jaw_rx", 0.08)):
         p[names.index(n)] = v
     return p
 
@@ -49,7 +49,7 @@ def gradient_seconds(ds, p, gx, warm_from=None):
 def finite_difference_check(model):
     """Adjoint vs central differences of cold solves, per control (prints a table)."""
     ds = DrivenSimulation(model)
-    p = model.parameters({"weights": {"lipCornerPull_L": 0.3, "lipPucker": 0.3, "browInnerUp_L": 0.2},
+    p = model.parameters({"weights": {"mouthSmileLeft": 0.3, "mouthPucker": 0.3, "browInnerUp": 0.2},
                           "jaw": [0.05, 0, 0, 0, 0, 0]})
     r, t = timed(lambda: ds.solve(p, warm=None, rtol=1e-10))
     acting = ds.sim.contacts.of(TriangleContacts).acting(r.X, model.jaw_matrix(ds.split(p)[1]))
@@ -63,7 +63,7 @@ def finite_difference_check(model):
     print(f"  largest relative error {err.max():.1e} ({ds.parameter_names[int(err.argmax())]})")
     # path dependence: the same controls solved warm from other states reach the same surface
     cold = ds.surface_of(r)
-    far = ds.solve(model.parameters({"weights": {"lipCornerPull_R": 0.8, "jawOpen": 0.6},
+    far = ds.solve(model.parameters({"weights": {"mouthSmileRight": 0.8, "jawOpen": 0.6},
                                      "jaw": [0.3, 0, 0, 0, -0.002, 0.002]}), warm=None)
     for label, start in (("the last finite-difference state", "last"), ("a wide smile with the jaw open", far)):
         d = np.linalg.norm(ds.surface_of(ds.solve(p, warm=start, rtol=1e-10)) - cold, axis=1)

@@ -34,7 +34,7 @@ def main():
     m = invface.template.build(resolution=a.resolution)
     cam = sample_camera(720, 540)
     vec = FitVector.of(m)
-    p = m.parameters({"weights": {"lipCornerPull_L": 0.5, "browInnerUp_R": 0.4}, "jaw": [0.08, 0, 0, 0, 0, 0]})
+    p = m.parameters({"weights": {"mouthSmileLeft": 0.5, "browInnerUp": 0.4}, "jaw": [0.08, 0, 0, 0, 0, 0]})
     z = vec.pack(p, np.array([0.05, -0.15, 0.02]), np.array([0.002, -0.001, 0.01]))
     sm = m.surface_model("blendshape")
     xr, J = posed_jacobian(sm, z, vec)

@@ -5,7 +5,9 @@
 Runs ``invface fit-plate PHOTO --model-kind both -o OUT/<name>`` for every JPEG/PNG in DIR
 (default ``../shared/data/real/photos``), then prints per photo and kind: curve RMS (px), curves
 within 2 px, the fit's seconds, the lips' volume change, the image RMS (linear) in the mouth
-(inside the outer lip curves) and over the face (``mouth_rms.py``) and every curve over 2 px. With
+(inside the outer lip curves) and over the face (``mouth_rms.py``), the blendshape weights above
+0.05, the simulation's muscles activated above 0.05 (paper 000 Fig. 6's sparsity) and every
+curve over 2 px. With
 ``--report-only`` it prints the table of an earlier run in OUT.
 """
 import argparse
@@ -33,9 +35,13 @@ def table(out):
             by = s["curve_rms_px_by_curve"]
             over = ", ".join(f"{n} {v:.1f}" for n, v in sorted(by.items()) if v > 2)
             img = npz_region_rms(d / kind / "fit.npz")
+            muscles = sum(v > 0.05 for v in s.get("activations", {}).values())
+            controls = sum(v > 0.05 for v in s["weights"].values())
             print(f"{d.name:16s} {kind:10s} {s['curve_rms_px']:.2f} px  {sum(v <= 2 for v in by.values())}/{len(by)}"
                   f"  {s['seconds']['total']:5.1f} s  lips {100 * s['lip_volume_change']:+.1f} %  image RMS mouth "
-                  f"{img['mouth'][0]:.4f} face {img['face'][0]:.4f}  over 2 px: {over}")
+                  f"{img['mouth'][0]:.4f} face {img['face'][0]:.4f}  weights > 0.05: {controls}"
+                  + (f", muscles > 0.05: {muscles}/{len(s['activations'])}" if kind == "simulation" else "")
+                  + f"  over 2 px: {over}")
 
 
 def main():

@@ -1,7 +1,7 @@
 """How closely the blendshape-driven tracks (paper 000 Eq. 10-11) and the simulation follow the
 rig at the lips.
 
-    python bench/tracks.py [--resolution 1 | --model FILE.npz] [--shapes lowerLipDepress,lipsPart]
+    python bench/tracks.py [--resolution 1 | --model FILE.npz] [--shapes mouthLowerDownLeft,mouthRollLower]
 
 For each shape at weight 1, per lip curve: the mean distance (mm) between the rig's displacement
 of the curve's vertices and the Poisson field's (``track_displacements`` carried to the skin by
@@ -18,7 +18,7 @@ import numpy as np
 
 import invface
 
-SHAPES = "lowerLipDepress,lipsPart,upperLipRaise,jawOpen,lipPucker,lipCornerPull_L"
+SHAPES = "mouthLowerDownLeft,mouthRollLower,mouthUpperUpLeft,jawOpen,mouthPucker,mouthSmileLeft"
 CURVES = ("lip_inner_lower", "lip_inner_upper", "lip_outer_lower", "lip_outer_upper")
 
 
