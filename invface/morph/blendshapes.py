@@ -7,17 +7,8 @@ import numpy as np
 
 from ..errors import MeshError
 from ..io.meshes import read_mesh
+from ..model.arkit import ARKIT_NAMES
 
-ARKIT_52 = (
-    "browDownLeft browDownRight browInnerUp browOuterUpLeft browOuterUpRight cheekPuff "
-    "cheekSquintLeft cheekSquintRight eyeBlinkLeft eyeBlinkRight eyeLookDownLeft eyeLookDownRight "
-    "eyeLookInLeft eyeLookInRight eyeLookOutLeft eyeLookOutRight eyeLookUpLeft eyeLookUpRight "
-    "eyeSquintLeft eyeSquintRight eyeWideLeft eyeWideRight jawForward jawLeft jawOpen jawRight "
-    "mouthClose mouthDimpleLeft mouthDimpleRight mouthFrownLeft mouthFrownRight mouthFunnel "
-    "mouthLeft mouthLowerDownLeft mouthLowerDownRight mouthPressLeft mouthPressRight mouthPucker "
-    "mouthRight mouthRollLower mouthRollUpper mouthShrugLower mouthShrugUpper mouthSmileLeft "
-    "mouthSmileRight mouthStretchLeft mouthStretchRight mouthUpperUpLeft mouthUpperUpRight "
-    "noseSneerLeft noseSneerRight tongueOut").split()
 SUFFIXES = (".obj", ".ply")
 
 
@@ -32,7 +23,7 @@ def _canonical(name):
 def recognised(name):
     """'ARKit', 'FACS' or None for a blendshape name."""
     from ..template.expressions import ACTION_UNITS
-    if _canonical(name) in ARKIT_52:
+    if _canonical(name) in ARKIT_NAMES:
         return "ARKit"
     if name in ACTION_UNITS or name.upper().startswith("AU"):
         return "FACS"
