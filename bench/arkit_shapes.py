@@ -29,7 +29,6 @@ import numpy as np
 from _common import add_json_option, write_json
 
 import invface
-from invface.model.rig import skin
 from invface.morph.build import face_vertices
 from invface.sim.driven import DrivenSimulation
 from invface.template import arkit_shapes
@@ -81,21 +80,16 @@ def main():
     names = model.blendshape_names
     jaws = model.meta["blendshape_jaw"]
     face = face_vertices(model)
-    K = len(names)
-    rest = ds.surface_of(ds.solve(np.zeros(K + 6), warm=None))
+    rest = ds.surface_of(ds.solve(np.zeros(len(names) + 6), warm=None))
 
     def sim_at(weights, jaw):
-        b = np.zeros(K)
-        for n, v in weights.items():
-            b[names.index(n)] = v
-        r = ds.solve(np.concatenate([b, jaw]), warm=None)
+        r = ds.solve(model.parameters({"weights": weights, "jaw": jaw}), warm=None)
         return ds.surface_of(r), r
 
+    rig = model.surface_model("blendshape")
+
     def rig_at(weights, jaw):
-        b = np.zeros(K)
-        for n, v in weights.items():
-            b[names.index(n)] = v
-        return skin(model.neutral + np.tensordot(b, model.blendshapes, 1), model.jaw_weights, model.jaw_matrix(jaw))
+        return rig.surface(model.parameters({"weights": weights, "jaw": jaw}))
 
     rows = {}
     todo = a.only.split(",") if a.only else names
@@ -109,14 +103,12 @@ def main():
             xs0, _ = sim_at(base_w, j)
             xs1, r = sim_at({**base_w, n: 1.0}, j)
             sim = xs1 - xs0
-            ref = rig_at({**base_w, n: 1.0}, j) - rig_at(base_w, j)
+            ref = own = rig_at({**base_w, n: 1.0}, j) - rig_at(base_w, j)
         else:
             xs, r = sim_at({n: 1.0}, jaw)
             sim = xs - rest
-            ref = ict[n] if n in ict else rig_at({n: 1.0}, jaw) - model.neutral
-            if np.any(jaw):
-                ref = rig_at({n: 1.0}, jaw) - model.neutral
-        own = rig_at({n: 1.0}, jaw) - model.neutral if n != "mouthClose" else ref
+            own = rig_at({n: 1.0}, jaw) - model.neutral
+            ref = own if np.any(jaw) else ict[n]      # a jaw shape's offsets are pre-skinning
         c = correlation(sim[face], ref[face])
         c_rig = correlation(sim[face], own[face])
         ratio = float(np.linalg.norm(sim[face]) / max(np.linalg.norm(ref[face]), 1e-30))

@@ -69,14 +69,11 @@ def test_the_simulation_makes_the_lip_controls(driven, stored, name):
     in the simulation kind correlates with ICT-FaceKit's same-named shape carried onto the
     head at >= 0.8, with at least half its size, keeping the flesh's volume within 1 %."""
     m = driven.model
-    K, names = len(m.blendshape_names), m.blendshape_names
+    names = m.blendshape_names
     jaws = m.meta["blendshape_jaw"]
 
     def solve(weights, jaw):
-        b = np.zeros(K)
-        for n, v in weights.items():
-            b[names.index(n)] = v
-        r = driven.solve(np.concatenate([b, jaw]), warm=None)
+        r = driven.solve(m.parameters({"weights": weights, "jaw": jaw}), warm=None)
         return driven.surface_of(r), r
 
     rig = m.surface_model("blendshape")
@@ -104,15 +101,11 @@ def test_funnel_and_pucker_differ_and_press_is_one_sided(driven):
     (each is nearer its own shape than the other's), and mouthPressLeft moves the actor's left
     half of the lips more than the right."""
     m = driven.model
-    names, K = m.blendshape_names, len(m.blendshape_names)
-    rest = driven.surface_of(driven.solve(np.zeros(K + 6), warm=None))
+    rest = driven.surface_of(driven.solve(m.parameters({}), warm=None))
     face = face_vertices(m)
-    sim = {}
-    for n in ("mouthFunnel", "mouthPucker", "mouthPressLeft"):
-        p = np.zeros(K + 6)
-        p[names.index(n)] = 1.0
-        sim[n] = (driven.surface_of(driven.solve(p, warm=None)) - rest)
-    B = dict(zip(names, m.blendshapes))
+    sim = {n: driven.surface_of(driven.solve(m.parameters({n: 1.0}), warm=None)) - rest
+           for n in ("mouthFunnel", "mouthPucker", "mouthPressLeft")}
+    B = dict(zip(m.blendshape_names, m.blendshapes))
     for a, b in (("mouthFunnel", "mouthPucker"), ("mouthPucker", "mouthFunnel")):
         assert correlation(sim[a][face], B[a][face]) > correlation(sim[a][face], B[b][face]) + 0.02, a
     lips = (np.abs(m.neutral[:, 1] + 0.0345) < 0.012) & (np.abs(m.neutral[:, 0]) < 0.03) & (m.neutral[:, 2] > 0.08)

@@ -30,12 +30,14 @@ from scipy.spatial import cKDTree
 from ..errors import BundleError
 from ..io.arrays import load_npz
 from ..mesh.closest import barycentric_points, closest_points
+from .expressions import activations_for
 
 DATA = Path(__file__).parent / "data" / "arkit_ict.npz"
 KINEMATIC = ("eyeBlinkLeft", "eyeBlinkRight")      # the template makes these itself
 
 # ARKit control: ({muscle base name: activation}, sides); sides 'L'/'R' engage only the actor's
-# left/right paired muscles, 'LR' both; midline muscles (procerus, orbicularis oris) always
+# left/right paired muscles, 'LR' both; midline muscles (procerus, orbicularis oris) always.
+# The blinks' are with the blinks (``expressions.BLINKS``).
 ARKIT_MUSCLES = {
     "browDownLeft": ({"corrugator_supercilii": 0.8, "procerus": 0.35}, "L"),
     "browDownRight": ({"corrugator_supercilii": 0.8, "procerus": 0.35}, "R"),
@@ -45,8 +47,6 @@ ARKIT_MUSCLES = {
     "cheekPuff": ({}, "LR"),
     "cheekSquintLeft": ({"orbicularis_oculi": 0.5, "zygomaticus_minor": 0.3}, "L"),
     "cheekSquintRight": ({"orbicularis_oculi": 0.5, "zygomaticus_minor": 0.3}, "R"),
-    "eyeBlinkLeft": ({"orbicularis_oculi_palpebralis": 0.8}, "L"),
-    "eyeBlinkRight": ({"orbicularis_oculi_palpebralis": 0.8}, "R"),
     "eyeLookDownLeft": ({}, "L"), "eyeLookDownRight": ({}, "R"),
     "eyeLookInLeft": ({}, "L"), "eyeLookInRight": ({}, "R"),
     "eyeLookOutLeft": ({}, "L"), "eyeLookOutRight": ({}, "R"),
@@ -124,13 +124,7 @@ def carry(shapes, neutral, triangles):
 
 def activations(name, muscles):
     """The activation vector (M,) that ARKit control ``name`` engages over ``muscles``."""
-    acts, sides = ARKIT_MUSCLES[name]
-    a = np.zeros(len(muscles))
-    for i, m in enumerate(muscles):
-        base = m.name[:-2] if m.side in ("L", "R") else m.name
-        if base in acts and (m.side == "M" or m.side in sides):
-            a[i] = acts[base]
-    return a
+    return activations_for(ARKIT_MUSCLES[name] + (None,), muscles)
 
 
 LID_REACH = 0.004      # m: skin this close to an eyeball's surface at rest slides on it
