@@ -6,8 +6,9 @@ Runs ``invface fit-plate PHOTO --model-kind both -o OUT/<name>`` for every JPEG/
 (default ``../shared/data/real/photos``), then prints per photo and kind: curve RMS (px), curves
 within 2 px, the fit's seconds, the lips' volume change, the image RMS (linear) in the mouth
 (inside the outer lip curves) and over the face (``mouth_rms.py``), the blendshape weights above
-0.05, the simulation's muscles activated above 0.05 (paper 000 Fig. 6's sparsity) and every
-curve over 2 px. With
+0.05, the simulation's muscles activated above 0.05 (paper 000 Fig. 6's sparsity), every
+curve over 2 px, each eye's gaze (yaw, pitch rad) and its pupil's distance from the plate's
+iris (px), and the fitted ARKit values against MediaPipe's own scores. With
 ``--report-only`` it prints the table of an earlier run in OUT.
 """
 import argparse
@@ -41,7 +42,21 @@ def table(out):
                   f"  {s['seconds']['total']:5.1f} s  lips {100 * s['lip_volume_change']:+.1f} %  image RMS mouth "
                   f"{img['mouth'][0]:.4f} face {img['face'][0]:.4f}  weights > 0.05: {controls}"
                   + (f", muscles > 0.05: {muscles}/{len(s['activations'])}" if kind == "simulation" else "")
-                  + f"  over 2 px: {over}")
+                  + f"  over 2 px: {over}"
+                  + "  gaze " + " ".join(f"{e} yaw {a['yaw']:+.2f} pitch {a['pitch']:+.2f}" for e, a in s.get("eyes", {}).items())
+                  + "  iris px " + " ".join(f"{v:.1f}" for v in s.get("iris_px", {}).values())
+                  + peer_line(s))
+
+
+def peer_line(s, top=4):
+    """The fit's ARKit values against MediaPipe's own scores: mean |difference| and the largest."""
+    peer = s.get("peer_arkit") or {}
+    diff = peer.get("fitted_minus_peer") or {}
+    if not diff:
+        return ""
+    worst = sorted(diff.items(), key=lambda kv: -abs(kv[1]))[:top]
+    return (f"  vs MediaPipe: mean |d| {peer['mean_abs_difference']:.3f}, largest "
+            + ", ".join(f"{k} {peer['scores'][k]:.2f}->{s['arkit'][k]:.2f}" for k, _ in worst))
 
 
 def main():

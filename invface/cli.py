@@ -615,7 +615,9 @@ def build_parser():
     ex = sub.add_parser("export", help="write an existing fit run's exports (the Live Link Face CSV of ARKit's "
                                        "52 controls per kind) into its folder")
     ex.add_argument("run", help="a fit-plate output folder")
-    ex.add_argument("--format", default="csv", help="comma-separated formats: csv (arkit_<kind>.csv)")
+    ex.add_argument("--format", default="csv", help="comma-separated formats: csv (arkit_<kind>.csv: Live Link Face "
+                    "CSV), usd (face_<kind>.usd: the fitted face's points per frame in cm, +Y up, the solved "
+                    "camera and the ARKit controls as animated attributes) (default: %(default)s)")
     ex.add_argument("--fps", type=POSITIVE, help="the clip's frame rate for the timecodes (default: the run's, else 24)")
     ex.set_defaults(func=cmd_export)
     cam = sub.add_parser("camera", help="camera tools")

@@ -159,7 +159,8 @@ def test_face_mask_fills_the_detector_oval():
     assert (mask & ~holed).sum() == pytest.approx(2 / 3 * 16 * 6, rel=0.35)    # the lens between them
     pts = np.arange(956, dtype=float).reshape(478, 2)
     c = curves_from_landmarks(pts)
-    assert set(c) == set(CURVE_INDICES) and {"nose_bridge", "nose_base", "jaw_line"} <= set(c)
+    assert set(c) == set(CURVE_INDICES) | {"iris_L", "iris_R"} and {"nose_bridge", "nose_base", "jaw_line"} <= set(c)
+    assert sorted((c["iris_L"][0, 0], c["iris_R"][0, 0])) == [pts[468, 0], pts[473, 0]]     # one iris each
     # the nostril base's middle point lies halfway from landmark 2 (columella) to 164 (philtrum)
     assert np.allclose(c["nose_base"][2], (pts[2] + pts[164]) / 2) and np.allclose(c["nose_base"][0], pts[240])
 

@@ -138,3 +138,36 @@ def test_a_small_face_in_a_wide_frame_is_found_on_a_crop(scale, at):
     if scale == 0.9:
         with pytest.raises(InvfaceError, match=r"wide: --face 5: only 1 face\(s\) found"):
             landmarks.detect_landmarks(frame, "wide", face=5)
+
+
+@needs_detector
+def test_irises_and_peer_scores_on_renders_of_a_known_gaze(small_expressive_model):
+    """Renders of the built-in head: the detector's iris centres (iris_L / iris_R by the nearer
+    eye) land within 2.5 px of the model's pupils, and turn with them; its peer scores name
+    sides as ARKit does, the actor's own (the actor's left eye shut: its squint rises on the left;
+    both eyes turned to the actor's left: eyeLookOutLeft and eyeLookInRight rise)."""
+    from invface.fit.landmarks import curves_from_landmarks, detect_face
+    from invface.io.images import linear_to_srgb
+    from invface.model.gaze import Eyes
+    from invface.render.camera import Camera
+    from invface.render.synthetic import render_plate, skin_albedo, studio_light
+    m = small_expressive_model
+    cam = Camera.front_view(512, 512)
+    seen = {}
+    for label, w in (("rest", {}), ("look", {"eyeLookOutLeft": 0.7, "eyeLookInRight": 0.7}),
+                     ("shut", {"eyeBlinkLeft": 1.0})):
+        p = m.parameters(w)
+        img, _ = render_plate(m, m.surface_model("blendshape").surface(p), cam, studio_light(), skin_albedo(m),
+                              parts_x=m.parts_positions(p), spp=16)
+        points, scores = detect_face(linear_to_srgb(img), name=label)
+        curves = curves_from_landmarks(points)
+        pupils = cam.project(Eyes(m).pupils(p)[0])[0]
+        if label != "shut":
+            for e, s in enumerate("LR"):
+                assert np.linalg.norm(curves[f"iris_{s}"].mean(0) - pupils[e]) < 2.5, (label, s)
+        seen[label] = (curves, scores)
+    moved = seen["look"][0]["iris_L"].mean(0) - seen["rest"][0]["iris_L"].mean(0)
+    assert moved[0] > 4.0                                          # to the image's right: the actor's left
+    look, rest, shut = (seen[k][1] for k in ("look", "rest", "shut"))
+    assert look["eyeLookOutLeft"] > rest["eyeLookOutLeft"] + 0.2 and look["eyeLookInRight"] > rest["eyeLookInRight"] + 0.2
+    assert shut["eyeSquintLeft"] + shut["eyeBlinkLeft"] > shut["eyeSquintRight"] + shut["eyeBlinkRight"] + 0.2

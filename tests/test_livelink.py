@@ -85,5 +85,5 @@ def test_export_of_an_existing_run(tmp_path):
     assert [r["Timecode"] for r in rows] == ["00:00:01:00.000", "00:00:01:01.000"]          # 30 fps
     with pytest.raises(InvfaceError, match="holds no fit"):
         invface.export(tmp_path)
-    with pytest.raises(InvfaceError, match="export format 'usd': use csv"):
-        invface.export(photo, formats="usd")
+    with pytest.raises(InvfaceError, match="export format 'fbx': use csv, usd"):
+        invface.export(photo, formats="fbx")

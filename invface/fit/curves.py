@@ -30,8 +30,10 @@ from ..mesh.sections import resample_even as resample
 from ..model.controls import FitVector
 from .dogleg import dogleg, with_linear_term
 from .lambdas import EQ15_ANCHOR_LAMBDA, EQ15_LAMBDA_1, EQ15_TRACK_LAMBDA
+from ..model.gaze import Eyes
 from ..model.pose import pose_points, posed_jacobian, posed_surface
-from .priors import prior_rows, regulariser, sparsity_slopes, temporal_prior
+from ..model.rig import euler_xyz, euler_xyz_derivatives
+from .priors import gaze_relief, prior_rows, regulariser, sparsity_slopes, temporal_prior
 
 PLATE_CURVES = ("lip_outer_upper", "lip_outer_lower", "lip_inner_upper", "lip_inner_lower",
                 "eye_L_upper", "eye_L_lower", "eye_R_upper", "eye_R_lower")
@@ -48,6 +50,13 @@ SMOOTHING_PASSES = 4
 # optimum the trust region shrinks to ~1e-5 and the default 1e-10 let the pose pass crawl
 # for its 200 iterations on a real photo.
 CURVE_FTOL = 1e-6
+# The irises: a plate "curve" per eye of its iris's points (the detector's centre and four limbus
+# points, MediaPipe 468-477), whose mean is matched to the model's pupil centre (``model.gaze``),
+# each taken from its eye's corners (``CurveObjective.iris_terms``): they set the eyeLook
+# controls' gaze. Each eye's two residuals (px) weigh as many rows as a lid's
+# curve has points, so the gaze counts as much as a lid.
+IRIS_CURVES = ("iris_L", "iris_R")
+IRIS_WEIGHT = 3.0
 
 
 def curve_weights(name, n):
@@ -76,7 +85,7 @@ def read_curves(path, model, image_size=None):
     curves = data.get("curves")
     if not isinstance(curves, dict) or not curves:
         raise InvfaceError(f"{path}: expected {{\"curves\": {{name: [[u, v], ...]}}}}")
-    unknown = sorted(set(curves) - set(model.curves))
+    unknown = sorted(set(curves) - set(model.curves) - set(IRIS_CURVES))
     if unknown:
         raise InvfaceError(f"{path}: unknown curve name(s) {unknown}; the model's curves are "
                            f"{sorted(model.curves)}")
@@ -100,6 +109,8 @@ def feature_of(name):
     'brow_R', 'nose', or the curve's own name (jaw_line, profile)."""
     if name.startswith("lip"):
         return "lips"
+    if name in IRIS_CURVES:
+        return "eye" + name[4:]
     if name.startswith(("eye_", "brow_")):
         return name[:name.index("_", 4)] if name.count("_") > 1 else name
     if name.startswith("nose"):
@@ -192,6 +203,7 @@ class CurveFit:
     history: list = field(default_factory=list)
     status: str = ""
     tracked: np.ndarray = None     # controls (P,) of the pose pass (None without one)
+    iris_px: dict = field(default_factory=dict)    # {iris curve: (1,) px pupil to plate iris}
 
     @property
     def rms_px(self):
@@ -208,6 +220,15 @@ class CurveObjective:
         self.curves = {k: v for k, v in curves.items() if k in model.curves}
         self.vertices = {k: np.asarray(model.curves[k]) for k in self.curves}
         self.weights = {k: curve_weights(k, len(v)) for k, v in self.vertices.items()}
+        eyes = Eyes(model)
+        self.eyes = eyes if len(eyes.sides) == 2 else None
+        lids = [f"eye_{s}_upper" for s in ("L", "R")]
+        self.irises = {e: np.asarray(curves[k], float).mean(0) for e, k in enumerate(IRIS_CURVES)
+                       if k in curves and lids[e] in curves and self.eyes is not None}
+        # each eye's corners: the model's upper lid's end vertices, the plate's lid's end points' midpoint
+        self.corners = {e: (np.asarray(model.curves[lids[e]])[[0, -1]],
+                            np.asarray(curves[lids[e]], float)[[0, -1]].mean(0)) for e in self.irises}
+        self.relief = gaze_relief(self.vec) if self.irises else None      # the irises fix the gaze
 
     def residuals(self, xr):
         """{name: (n, 2) projected-minus-closest px} at posed vertices xr (V, 3)."""
@@ -220,13 +241,59 @@ class CurveObjective:
     def __call__(self, z):
         xr, Jall = posed_jacobian(self.sm, z, self.vec)
         rows, jac = self.rows(xr, Jall)
-        reg, Jreg = regulariser(z, self.vec, self.lam)
+        if self.irises:
+            r, J = self.iris_rows(z, xr, Jall)
+            rows, jac = rows + [r], jac + [J]
+        reg, Jreg = regulariser(z, self.vec, self.lam, relief=self.relief)
         rows, jac = rows + [reg], jac + [Jreg]
         if self.prior is not None:
             rp, Jp = prior_rows(z, self.prior)
             rows.append(rp)
             jac.append(Jp)
         return np.concatenate(rows), np.vstack(jac)
+
+    def pupils_px(self, z):
+        """(pixels (2, 2) of the model's pupil centres at z, d pixel / dz (2, 2, z size))."""
+        p, th, t = self.vec.unpack(z)
+        X, JX = self.eyes.pupils(p)
+        R = euler_xyz(th)
+        uv, duv = projection_jacobian(self.camera, X @ R.T + t)
+        dX = np.concatenate([JX @ R.T, np.einsum("kij,ej->eki", euler_xyz_derivatives(th), X),
+                             np.broadcast_to(np.eye(3), (2, 3, 3))], 1)            # (2, z size, 3)
+        return uv, np.einsum("eij,ekj->eik", duv, dX)
+
+    def iris_terms(self, z, xr):
+        """The gaze rows: per eye, IRIS_WEIGHT x ((model pupil - model corners' midpoint) -
+        (plate iris centre - plate corners' midpoint)) px, the corners being the ends of the
+        eye's upper lid curve: the iris's place in the eye, which the eye's size and spacing
+        do not bias. Returns (rows (2 e,), d rows / dz through the pupils (2 e, z size), the
+        corner vertex ids (2 e, 2), d rows / d their posed positions (2 e, 2, 3)), for the eyes
+        whose irises and upper lids the plate has."""
+        uv, J = self.pupils_px(z)
+        rows, jac, vids, dx = [], [], [], []
+        for e in sorted(self.irises):
+            vid, plate_mid = self.corners[e]
+            cuv, cd = projection_jacobian(self.camera, xr[vid])
+            rows.append(uv[e] - cuv.mean(0) - (self.irises[e] - plate_mid))
+            jac.append(J[e])
+            vids += [vid, vid]
+            dx += [-0.5 * cd[:, 0], -0.5 * cd[:, 1]]
+        w = IRIS_WEIGHT
+        return w * np.concatenate(rows), w * np.concatenate(jac), np.array(vids), w * np.array(dx)
+
+    def iris_rows(self, z, xr, Jall):
+        """(gaze rows (2 e,) px, their Jacobian (2 e, z size)) with d xr / dz = Jall
+        (z size, V, 3) (``iris_terms``)."""
+        r, J, vids, dx = self.iris_terms(z, xr)
+        return r, J + np.einsum("nmi,knmi->nk", dx, Jall[:, vids])
+
+    def iris_px(self, z, xr):
+        """{iris curve name: (1,) px}: how far the model's pupil sits from the plate's iris, each
+        taken from its eye's corners' midpoint (``iris_terms``)."""
+        if not self.irises:
+            return {}
+        r = self.iris_terms(z, xr)[0].reshape(-1, 2) / IRIS_WEIGHT
+        return {IRIS_CURVES[e]: np.array([np.linalg.norm(d)]) for e, d in zip(sorted(self.irises), r)}
 
     def rows(self, xr, Jall):
         """Signed distances (lists of (n,) px per curve) and their Jacobians ((n, z size) each)
@@ -262,11 +329,12 @@ def initial_pose(model, camera, curves, rotation=None, translation=None, samples
     solvePnP on arc-length resampled point pairs; the given pose is the PnP start."""
     import cv2
     from scipy.spatial.transform import Rotation
-    from ..model.rig import euler_xyz
     th = np.zeros(3) if rotation is None else np.asarray(rotation, float)
     t = np.zeros(3) if translation is None else np.asarray(translation, float)
     obj, img = [], []
     for name, poly in curves.items():
+        if name not in model.curves:
+            continue
         o, q = resample(curve_points(model, name, model.neutral), samples), resample(poly, samples)
         # pair points in the model curve's direction (plate curves may run either way)
         u, _ = camera.project(pose_points(o, th, t))
@@ -330,7 +398,8 @@ def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=N
         if not pose:
             lo_[vec.pose], hi_[vec.pose] = z[vec.pose], z[vec.pose]
         log = (lambda h: progress(dict(h, **{"pass": name}))) if progress else None
-        fun = with_linear_term(CurveObjective(model, sm, camera, curves, lam, prior), sparsity_slopes(vec, lam))
+        obj = CurveObjective(model, sm, camera, curves, lam, prior)
+        fun = with_linear_term(obj, sparsity_slopes(vec, lam, relief=obj.relief))
         res = dogleg(fun, z, lo_, hi_, max_iter=max_iter, ftol=CURVE_FTOL, progress=log)
         history.extend(dict(h, **{"pass": name}) for h in res.history)
         return res
@@ -348,5 +417,5 @@ def fit_curves(model, camera, curves, kind="blendshape", lam=EQ15_LAMBDA_1, p0=N
     _, xr = posed_surface(sm, res.x, vec)
     resid = {k: np.linalg.norm(v, axis=1) for k, v in obj.residuals(xr).items()}
     p, rot, tr = vec.unpack(res.x)
-    return CurveFit(p=p, rotation=rot, translation=tr,
-                    residual_px=resid, history=history, status=res.status, tracked=tracked)
+    return CurveFit(p=p, rotation=rot, translation=tr, residual_px=resid, history=history, status=res.status,
+                    tracked=tracked, iris_px=obj.iris_px(res.x, xr))

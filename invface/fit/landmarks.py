@@ -55,6 +55,8 @@ CURVE_INDICES = {
     "nose_base": [240, 97, (2, 164, 0.5), 326, 460],
     "jaw_line": [132, 58, 172, 136, 150, 149, 176, 148, 152, 377, 400, 378, 379, 365, 397, 288, 361],
 }
+# the two irises: centre, then four points on the limbus
+IRIS_INDICES = ((468, 469, 470, 471, 472), (473, 474, 475, 476, 477))
 # FaceLandmarksConnections.FACE_LANDMARKS_FACE_OVAL as a closed polygon, from the forehead
 FACE_OVAL = [10, 338, 297, 332, 284, 251, 389, 356, 454, 323, 361, 288, 397, 365, 379, 378, 400,
              377, 152, 148, 176, 149, 150, 136, 172, 58, 132, 93, 234, 127, 162, 21, 54, 103, 67, 109]
@@ -93,7 +95,8 @@ def _landmarker(mode):
     except ImportError as e:
         raise InvfaceError(f"automatic curves need mediapipe ({e}); install with: {INSTALL}") from None
     opts = vision.FaceLandmarkerOptions(base_options=BaseOptions(model_asset_path=str(path)), num_faces=1,
-                                        running_mode=getattr(vision.RunningMode, mode))
+                                        running_mode=getattr(vision.RunningMode, mode),
+                                        output_face_blendshapes=True)
     return vision.FaceLandmarker.create_from_options(opts)
 
 
@@ -114,6 +117,22 @@ def _points(res, size, name):
         raise InvfaceError(f"{name}: no face found by the landmark detector; draw the curves and pass --curves")
     h, w = size
     return np.array([[p.x * w - 0.5, p.y * h - 0.5] for p in res.face_landmarks[0]])
+
+
+def _scores(res):
+    """{ARKit name: score in [0, 1]} of the landmarker's blendshape head for its first face, or
+    {} when it gave none. Its Left and Right are the actor's own, as ARKit's (on a render of the
+    built-in head with the actor's left eye shut or both eyes turned to the actor's left, its
+    eyeSquintLeft and eyeLookOutLeft / eyeLookInRight rise: tests/test_landmarks.py)."""
+    if not getattr(res, "face_blendshapes", None):
+        return {}
+    out = {}
+    for c in res.face_blendshapes[0]:
+        name = c.category_name
+        if name.startswith("_"):
+            continue                                   # "_neutral"
+        out[name] = round(float(c.score), 6)
+    return out
 
 
 PROPOSAL_CROP = 384     # px: a proposed face's crop is scaled to this size for the landmarker
@@ -181,12 +200,18 @@ def _in_crop(det, image, box):
     if not res.face_landmarks:
         return None
     pts = _points(res, size, "crop")
-    return np.stack([x0 + (pts[:, 0] + 0.5) / scale - 0.5, y0 + (pts[:, 1] + 0.5) / scale - 0.5], 1)
+    return np.stack([x0 + (pts[:, 0] + 0.5) / scale - 0.5, y0 + (pts[:, 1] + 0.5) / scale - 0.5], 1), _scores(res)
 
 
 def detect_landmarks(image_srgb, name="plate", face=0):
-    """(478, 2) px: the detector's landmarks on an sRGB image (H, W, 3) in [0, 1] or uint8;
-    pixels in the OpenCV convention (centre of the top-left pixel is (0, 0)).
+    """(478, 2) px: the detector's landmarks on an sRGB image (``detect_face``)."""
+    return detect_face(image_srgb, name, face)[0]
+
+
+def detect_face(image_srgb, name="plate", face=0):
+    """(landmarks (478, 2) px, peer scores {ARKit name: [0, 1]}) on an sRGB image (H, W, 3) in
+    [0, 1] or uint8; pixels in the OpenCV convention (centre of the top-left pixel is (0, 0));
+    the scores are MediaPipe's own estimate of the 52 ARKit controls (``_scores``).
 
     The whole frame is tried first. Where it finds no face, or ``face`` asks for another than
     the first, each ``face_proposals`` box is tried on a crop around it, and the faces found
@@ -197,14 +222,14 @@ def detect_landmarks(image_srgb, name="plate", face=0):
             mp_img, size = _mp_image(img)
             found = det.detect(mp_img)
             if found.face_landmarks:
-                return _points(found, size, name)
+                return _points(found, size, name), _scores(found)
         proposals = face_proposals(img)
         faces = []
         for box in proposals:
-            pts = _in_crop(det, img, box)
-            if pts is not None and all(np.linalg.norm(pts.mean(0) - f.mean(0)) > 0.5 * np.ptp(f[:, 0])
+            got = _in_crop(det, img, box)
+            if got is not None and all(np.linalg.norm(got[0].mean(0) - f[0].mean(0)) > 0.5 * np.ptp(f[0][:, 0])
                                        for f in faces):
-                faces.append(pts)
+                faces.append(got)
             if len(faces) > face:
                 return faces[face]
     if faces:
@@ -221,14 +246,16 @@ class LandmarkTracker:
     a new track; a frame where the whole frame shows no face is detected on crops around face
     proposals (``detect_landmarks``), and the track starts again after it. face: another face
     than the first (numbered as ``detect_landmarks`` numbers them), found afresh each frame.
-    Use as a context manager or call ``close()``."""
+    Use as a context manager or call ``close()``. ``scores``: the last frame's peer scores
+    (``detect_face``)."""
 
     def __init__(self, face=0):
-        self._det, self._last, self.face = None, None, int(face)
+        self._det, self._last, self.face, self.scores = None, None, int(face), {}
 
     def __call__(self, image_srgb, time_s, name="frame"):
         if self.face:                        # another face than the first: found afresh each frame
-            return detect_landmarks(image_srgb, name, self.face)
+            points, self.scores = detect_face(image_srgb, name, self.face)
+            return points
         ms = int(round(1000 * float(time_s)))
         with native_stderr_quiet():
             if self._det is None or (self._last is not None and ms <= self._last):
@@ -239,7 +266,9 @@ class LandmarkTracker:
             found = self._det.detect_for_video(img, ms)
         if not found.face_landmarks:         # too small for the whole frame: crops around proposals
             self.close()
-            return detect_landmarks(image_srgb, name)
+            points, self.scores = detect_face(image_srgb, name)
+            return points
+        self.scores = _scores(found)
         return _points(found, size, name)
 
     def close(self):
@@ -255,13 +284,23 @@ class LandmarkTracker:
 
 
 def curves_from_landmarks(points):
-    """{curve name: (n, 2) px} from the detector's landmarks (478, 2)."""
+    """{curve name: (n, 2) px} from the detector's landmarks (478, 2): ``CURVE_INDICES``, and
+    with the irises (468-477) each eye's iris (centre and four limbus points) as iris_L / iris_R,
+    one to each eye, the pairing whose iris centres lie nearer their eyes' lid curves' middles."""
     def at(k):
         if isinstance(k, tuple):
             a, b, t = k
             return (1 - t) * points[a] + t * points[b]
         return points[k]
-    return {name: np.array([at(k) for k in ids]) for name, ids in CURVE_INDICES.items()}
+    out = {name: np.array([at(k) for k in ids]) for name, ids in CURVE_INDICES.items()}
+    if len(points) >= IRIS_INDICES[1][-1] + 1:
+        mids = [np.concatenate([out[f"eye_{s}_upper"], out[f"eye_{s}_lower"]]).mean(0) for s in "LR"]
+        a, b = (np.asarray(points[list(ids)], float) for ids in IRIS_INDICES)
+        near = lambda i, e: np.linalg.norm(i[0] - mids[e])
+        if near(a, 0) + near(b, 1) > near(a, 1) + near(b, 0):
+            a, b = b, a
+        out["iris_L"], out["iris_R"] = a, b
+    return out
 
 
 def detect_curves(image_srgb, name="plate"):

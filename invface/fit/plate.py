@@ -32,9 +32,10 @@ import numpy as np
 
 from ..errors import ImageError, InvfaceError, SimulationError
 from ..model.controls import FitVector
-from .curves import CurveObjective, curve_points, fit_curves, projection_jacobian, rms_px
+from ..model.gaze import Eyes
+from .curves import IRIS_CURVES, CurveObjective, curve_points, fit_curves, projection_jacobian, rms_px
 from .lambdas import EQ15_LAMBDA_1, EQ16_TEMPORAL
-from ..model.pose import posed_parts, posed_surface, unpose_points
+from ..model.pose import pose_points, posed_parts, posed_surface, unpose_points
 from .results import NamedControls, write_fit_files
 from .shading import fit_shading
 
@@ -69,6 +70,7 @@ class PlateFit(NamedControls):
     lip_volume_change: float = 0.0
     status: str = ""
     image_rms_by_region: dict = field(default_factory=dict)    # ``fit.regions.region_rms``
+    iris_px: dict = field(default_factory=dict)     # {iris curve: (1,) px, model pupil to plate iris}
 
     @property
     def curve_rms_px(self):
@@ -86,6 +88,7 @@ class PlateFit(NamedControls):
                 "active_muscles": int(sum(v > 1e-2 for v in self.activations.values())),
                 "curve_rms_px": self.curve_rms_px,
                 "curve_rms_px_by_curve": {k: rms_px({k: v}) for k, v in sorted(self.residual_px.items())},
+                "iris_px": {k: float(v[0]) for k, v in sorted(self.iris_px.items())},
                 "image_rms": self.image_rms, "image_rms_by_region": self.image_rms_by_region,
                 "lip_volume_change": self.lip_volume_change, "seconds": self.seconds,
                 "history": self.history}
@@ -174,8 +177,8 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     render = FaceRenderer(model.triangles, cam, spp=spp, backplate=plate.image, parts=model.parts).image(
         xr, calibration.gamma, calibration.albedo, parts_x=posed_parts(model, vec.pack(p, rot, tr), vec))[..., :3]
     inside = slice(None) if plate.mask is None else np.asarray(plate.mask, bool)
-    residual = {k: np.linalg.norm(v, axis=1)
-                for k, v in CurveObjective(model, sm, cam, curves, 0.0).residuals(xr).items()}
+    final = CurveObjective(model, sm, cam, curves, 0.0)
+    residual = {k: np.linalg.norm(v, axis=1) for k, v in final.residuals(xr).items()}
     acts, X = {}, None
     if kind == "simulation":
         res = sm.result_at(p)
@@ -187,7 +190,8 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
                     residual_px=residual, image_rms=float(np.sqrt(np.mean((render - plate.image)[inside] ** 2))),
                     history=history, seconds=seconds, activations=acts,
                     lip_volume_change=lip_volume_change(model, p, X), status=status,
-                    image_rms_by_region=region_rms(render, plate.image, curves))
+                    image_rms_by_region=region_rms(render, plate.image, curves),
+                    iris_px=final.iris_px(vec.pack(p, rot, tr), xr))
 
 
 def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=None):
@@ -195,7 +199,8 @@ def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=
     camera, and the per-vertex error (V,) m against a truth when given) into ``folder``
     atomically; the report (``invface.report.fit``) reads them."""
     summary = dict(fit.summary(), plate=str(plate.path), **(extra or {}))
-    names = sorted(curves)
+    eyes = len(Eyes(model).sides) == 2
+    names = sorted(n for n in curves if n in model.curves or (eyes and n in IRIS_CURVES))
     arrays = {"plate": plate.image.astype(np.float32), "render": fit.render.astype(np.float32),
               "surface": fit.surface, "triangles": np.asarray(model.triangles),
               "neutral": model.neutral, "p": fit.p,
@@ -207,8 +212,17 @@ def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=
         arrays["mask"] = np.asarray(plate.mask, bool)
     for i, n in enumerate(names):
         arrays[f"curve_{i}"] = np.asarray(curves[n], float)
-        arrays[f"model_curve_{i}"] = projection_jacobian(plate.camera, curve_points(model, n, fit.surface))[0]
+        arrays[f"model_curve_{i}"] = projection_jacobian(plate.camera, model_curve(model, n, fit))[0]
     return write_fit_files(folder, summary, arrays)
+
+
+def model_curve(model, name, fit):
+    """(n, 3) m posed: the model's curve ``name`` on the fit's surface, or for an iris curve
+    (``IRIS_CURVES``) the eye's limbus, closed, at the fit's gaze and pose."""
+    if name not in IRIS_CURVES:
+        return curve_points(model, name, fit.surface)
+    ring = Eyes(model).iris_ring(fit.p)[IRIS_CURVES.index(name)]
+    return pose_points(np.concatenate([ring, ring[:1]]), fit.rotation, fit.translation)
 
 
 def read_truth(path, model):

@@ -12,11 +12,28 @@ import numpy as np
 SPARSITY = 0.4
 
 
-def sparsity_slopes(vec, lam, kappa=SPARSITY):
+# The eyeLook controls' share of the weights' L2 and L1 terms where the plate's irises fix the
+# gaze (``fit.curves.IRIS_CURVES``): a gaze is not an expression that the prior should hold at
+# rest, and at the full Eq. 15 lambda_1 (60 px per unit weight) a 0.5 look was fitted at half
+# its size with the pupils 9 px from the irises.
+GAZE_PRIOR = 0.02
+
+
+def gaze_relief(vec):
+    """(P,) factors on the controls' prior: GAZE_PRIOR on the eyeLook weights, 1 elsewhere."""
+    f = np.ones(vec.P)
+    f[[i for i, n in enumerate(vec.blendshape_names) if n.startswith("eyeLook")]] = GAZE_PRIOR
+    return f
+
+
+def sparsity_slopes(vec, lam, kappa=SPARSITY, relief=None):
     """The L1 term's slopes c (vec.size,): kappa * lam on the blendshape weights (all >= 0),
-    0 on the jaw and the pose; the term is c . z (``dogleg.with_linear_term``)."""
+    0 on the jaw and the pose, times ``relief`` (P,) when given (``gaze_relief``); the term is
+    c . z (``dogleg.with_linear_term``)."""
     c = np.zeros(vec.size)
     c[vec.weights] = kappa * lam
+    if relief is not None:
+        c[vec.controls] *= relief
     return c
 
 
@@ -35,10 +52,12 @@ def prior_rows(z, prior):
     return w * (np.asarray(z, float) - c), np.diag(w)
 
 
-def regulariser(z, vec, lam, center=None):
+def regulariser(z, vec, lam, center=None, relief=None):
     """Rows sqrt(lam) (p - center) (P,) and their Jacobian (P, vec.size): the lambda |w|^2
-    terms of Eq. 13 and 15 and Eq. 16's lambda_2 |w - w^|^2 (center: default 0)."""
+    terms of Eq. 13 and 15 and Eq. 16's lambda_2 |w - w^|^2 (center: default 0); ``relief``
+    (P,): factors on lam per control (``gaze_relief``)."""
     c = 0 if center is None else center
+    s = np.sqrt(lam * (1.0 if relief is None else np.asarray(relief, float)))
     J = np.zeros((vec.P, vec.size))
-    J[:, vec.controls] = np.sqrt(lam) * np.eye(vec.P)
-    return np.sqrt(lam) * (np.asarray(z, float)[vec.controls] - c), J
+    J[:, vec.controls] = np.diag(np.broadcast_to(s, (vec.P,)))
+    return s * (np.asarray(z, float)[vec.controls] - c), J

@@ -244,6 +244,13 @@ class ShadingObjective:
                 rc, Jc = self.curves.rows(xr, Jall)
                 rows += [np.sqrt(self.lam1) * r for r in rc]
                 jac += [np.sqrt(self.lam1) * J for J in Jc]
+            if self.curves.irises:              # the gaze: the pupils on the plate's irises
+                if Jall is None:
+                    rows.append(np.sqrt(self.lam1) * self.curves.iris_terms(z, xr)[0])
+                else:
+                    ri, Ji = self.curves.iris_rows(z, xr, Jall)
+                    rows.append(np.sqrt(self.lam1) * ri)
+                    jac.append(np.sqrt(self.lam1) * Ji)
         return np.concatenate(rows), (None if jac is None else np.vstack(jac))
 
     def _cost(self, r_image, r_rest):
@@ -302,9 +309,15 @@ class ShadingObjective:
             rc, g_xr = self.curves.position_gradient(xr_np)
             rows.append(np.sqrt(self.lam1) * rc)
             g_xr = self.lam1 * g_xr
+        g_pupils = 0.0
+        if self.curves is not None and self.curves.irises:      # the gaze rows: pupils and eye corners
+            ri, Ji, vids, dx = self.curves.iris_terms(z, xr_np)
+            rows.append(np.sqrt(self.lam1) * ri)
+            g_pupils = self.lam1 * ri @ Ji
+            np.add.at(g_xr, vids, self.lam1 * ri[:, None, None] * dx)
         dr.backward(dr.sum(img.array * self._image_adjoint(psi * dpsi).array)
                     + dr.sum(xr * mi.Float(g_xr.astype(np.float32).ravel())))
-        g = np.array(dr.grad(zd), np.float64) + prior @ Jp
+        g = np.array(dr.grad(zd), np.float64) + prior @ Jp + g_pupils
         return self._cost(psi, np.concatenate(rows)), g
 
     def normal_equations(self, z):
@@ -484,10 +497,10 @@ EYE_OPENINGS = (("eye_L_upper", "eye_L_lower"), ("eye_R_upper", "eye_R_lower"))
 def without_eyes(mask, curves, shape):
     """The data term's mask (H, W) float32 (``mask`` (H, W) or None: all ones) less the eye
     openings between the plate's lid curves (``curves`` {name: (n, 2) px}, EYE_OPENINGS).
-    The model's eyeballs look straight ahead and carry no gradient (they are held still in
-    the image Jacobian), while a plate's gaze is its own; the iris and the pupil moving with
-    the pose put a 25 % error into the translation's Jacobian column (1677 against 2241 from
-    differences) on the small head. The lids' edges against the eyes stay in the term where
+    The model's eyeballs turn with the gaze that the plate's irises set (the curve term's iris
+    rows, ``fit.curves.IRIS_CURVES``), but they carry no gradient in the image Jacobian (held
+    still there); the iris and the pupil moving with the pose put a 25 % error into the
+    translation's Jacobian column (1677 against 2241 from differences) on the small head. The lids' edges against the eyes stay in the term where
     the model's lids are more open than the plate's. A photo's detector mask has the openings
     removed already (``landmarks.face_mask``)."""
     import cv2
@@ -560,7 +573,8 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
                 raise
             log(ne.cost)
             return _ScaledEquations(ne, s)
-        res = dogleg(with_linear_term(fun, sparsity_slopes(vec, lam2) * s), z0 / s, lo / s, hi / s,
+        relief = obj.curves.relief if obj.curves is not None else None
+        res = dogleg(with_linear_term(fun, sparsity_slopes(vec, lam2, relief=relief) * s), z0 / s, lo / s, hi / s,
                      max_iter=max_iter, radius=radius, ftol=ftol, min_radius=1e-2, adapt_curvature=True)
         for h, step in zip(history[1:], res.history):       # the dogleg's verdict on each trial
             h.update(accepted=step["accepted"], rho=step["rho"], radius=step["radius"], mu=step["mu"])

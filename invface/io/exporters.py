@@ -10,6 +10,7 @@ has. ``export(path, data)`` picks the writer by the path's suffix; a new format 
 | .npz                        | {name: array}                 | arrays.savez         |
 | .csv                        | (header, rows)                | tables.write_csv     |
 | .html .txt .xml .md         | str                           | atomic.write_text    |
+| .usd .usda .usdc            | a take: {"frames", "triangles", "camera", "fps"} | usd.write_usd |
 
 Named formats (``export(path, data, format=NAME)``), for files whose suffix says too little:
 
@@ -99,6 +100,14 @@ register(".json", _json)
 register(".npz", _npz)
 register(".csv", _csv)
 register((".html", ".txt", ".xml", ".md"), _text)
+
+
+def _usd(path, data, **_):
+    from .usd import write_usd
+    write_usd(path, data)
+
+
+register((".usd", ".usda", ".usdc"), _usd)
 
 
 def _livelink(path, data, **_):

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..errors import ControlsError
 from .arkit import arkit_values, translate, unsupported
+from .gaze import eye_angles
 
 
 # one unit of each fit-vector entry (``FitVector.scales``): weight, jaw (3 rad, 3 m), head rotation
@@ -187,10 +188,13 @@ class FitVector:
     def to_dict(self, z):
         """The named dictionary of ``fit.json``: weights by name, jaw (6), rotation (rad) and
         translation (m) of the head, and the 52 ARKit controls (``arkit.arkit_values``) with the
-        ones this model cannot make (``arkit_unsupported``)."""
+        ones this model cannot make (``arkit_unsupported``), and each eye's gaze, yaw and pitch
+        in rad (``gaze.eye_angles``: yaw towards the actor's left, pitch up)."""
         p, rot, tr = self.unpack(z)
+        eyes = eye_angles(self.blendshape_names, p[self.weights])
         return {"weights": self.weights_dict(p), "jaw": p[self.jaw].tolist(),
                 "rotation": rot.tolist(), "translation": tr.tolist(),
+                "eyes": {s: {"yaw": round(y, 6), "pitch": round(q, 6)} for s, (y, q) in eyes.items()},
                 "arkit": arkit_values(self.blendshape_names, p[self.weights], p[self.jaw]),
                 "arkit_unsupported": unsupported(self.blendshape_names)}
 

@@ -79,7 +79,9 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
             _say(progress, message=f"frame {frame.name} (t = {frame.time:.2f} s)")
 
             def detector(image, name, t=frame.time):
-                return tracker(image, t, name)
+                points = tracker(image, t, name)
+                detector.scores = tracker.scores          # the peer's ARKit scores (find_curves)
+                return points
 
             def finished(ff, kind, folder=folder):
                 fit = ff.fits[kind]

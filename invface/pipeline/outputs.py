@@ -130,10 +130,58 @@ def write_arkit_csv(out, kinds, fps=24.0, single=False):
             recs = sequence_records(out, [kind])[kind]
         if not recs:
             continue
-        frames = [{"frame": r.get("frame", i), "arkit": r.get("arkit", {}), "rotation": r.get("rotation", [0, 0, 0])}
-                  for i, r in enumerate(recs)]
+        frames = [{"frame": r.get("frame", i), "arkit": r.get("arkit", {}), "rotation": r.get("rotation", [0, 0, 0]),
+                   "eyes": livelink_eyes(r.get("eyes"))} for i, r in enumerate(recs)]
         paths.append(export(Path(out) / f"arkit_{kind}.csv",
                             {"frames": frames, "arkit_names": ARKIT_NAMES, "fps": fps or 24.0}, format="livelink"))
+    return paths
+
+
+def livelink_eyes(eyes):
+    """(6,) rad: Live Link Face's eye columns (left yaw, pitch, roll, right yaw, pitch, roll) from
+    fit.json's "eyes" ({"L": {"yaw", "pitch"}, "R": ...}: ``model.gaze``; roll 0), zeros without it."""
+    out = np.zeros(6)
+    for i, s in enumerate(("L", "R")):
+        e = (eyes or {}).get(s) or {}
+        out[3 * i:3 * i + 2] = e.get("yaw", 0.0), e.get("pitch", 0.0)
+    return out
+
+
+def take_frames(run, kind, single):
+    """The frames of one kind for a USD take (``io.usd.write_usd``): fit.json's values with each
+    frame's posed surface from its fit.npz, flagged frames left out (USD interpolates them), and
+    the first frame's camera and triangles. Returns (frames, triangles, camera dict) or None."""
+    if single:
+        f = Path(run) / kind / "fit.json"
+        recs = [dict(json.loads(f.read_text()), _dir=str(f.parent))] if f.is_file() else []
+    else:
+        recs = [dict(r, _dir=str(Path(run) / r["_name"] / kind)) for r in sequence_records(run, [kind])[kind]]
+    frames, tri, cam = [], None, None
+    for i, r in enumerate(recs):
+        npz = Path(r["_dir"]) / "fit.npz"
+        if r.get("flagged") or not npz.is_file():
+            continue
+        with np.load(npz, allow_pickle=False) as d:
+            points = d["surface"]
+            if tri is None:
+                tri, cam = d["triangles"], json.loads(str(d["camera"]))
+        e = livelink_eyes(r.get("eyes"))
+        frames.append({"frame": r.get("frame", i), "points": points, "arkit": r.get("arkit", {}),
+                       "rotation": r.get("rotation", [0, 0, 0]), "translation": r.get("translation", [0, 0, 0]),
+                       "eyes": e[[0, 1, 3, 4]]})
+    return (frames, tri, cam) if frames else None
+
+
+def write_usd_takes(out, kinds, fps=24.0, single=False):
+    """out/face_<kind>.usd per kind: the take as a USD stage (``io.usd``). Returns the paths."""
+    from ..io.exporters import export
+    paths = []
+    for kind in kinds:
+        take = take_frames(out, kind, single)
+        if take is not None:
+            frames, tri, cam = take
+            paths.append(export(Path(out) / f"face_{kind}.usd",
+                                {"frames": frames, "triangles": tri, "camera": cam, "fps": fps or 24.0}))
     return paths
 
 
@@ -147,12 +195,14 @@ def write_sequence_outputs(out, kinds, fps=0.0):
     return paths
 
 
-EXPORT_FORMATS = ("csv",)
+EXPORT_FORMATS = ("csv", "usd")
 
 
 def export(run_dir, formats=("csv",), fps=None):
     """Write an existing fit run's exports into its folder: "csv" is the Live Link Face CSV per
-    kind (``write_arkit_csv``: arkit_<kind>.csv). run_dir: a fit-plate output folder (a photo's,
+    kind (``write_arkit_csv``: arkit_<kind>.csv), "usd" the take as a USD stage per kind
+    (``write_usd_takes``: face_<kind>.usd: the fitted face's points per frame, the solved camera,
+    the ARKit controls). run_dir: a fit-plate output folder (a photo's,
     with <kind>/fit.json, or a sequence's, with <frame>/<kind>/fit.json); fps: the clip's frame
     rate (default run.json's, else 24). Returns the paths written; InvfaceError naming the folder
     when it holds no fit, or an unknown format."""
@@ -171,4 +221,5 @@ def export(run_dir, formats=("csv",), fps=None):
         raise InvfaceError(f"{run}: holds no fit (no <kind>/fit.json, nor a sequence's run.json with "
                            "<frame>/<kind>/fit.json): give a fit-plate output folder")
     rate = fps or record.get("fps") or 24.0
-    return write_arkit_csv(run, kinds, rate, single=bool(single)) if "csv" in formats else []
+    paths = write_arkit_csv(run, kinds, rate, single=bool(single)) if "csv" in formats else []
+    return paths + (write_usd_takes(run, kinds, rate, single=bool(single)) if "usd" in formats else [])

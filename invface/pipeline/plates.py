@@ -60,17 +60,28 @@ def plate_frames(source):
     return [clip.paths[i] for i in clip.indices]
 
 
+def peer_comparison(fitted, peer):
+    """fit.json's "peer_arkit": the detector's own ARKit scores (MediaPipe's, ``peer``
+    {name: [0, 1]}), the fit's values minus them per control (``fitted``: fit.json's "arkit"),
+    and their mean absolute difference over the controls both name."""
+    both = sorted(set(fitted) & set(peer))
+    diff = {k: round(float(fitted[k]) - float(peer[k]), 6) for k in both}
+    return {"scores": dict(peer), "fitted_minus_peer": diff,
+            "mean_abs_difference": round(float(np.mean(np.abs(list(diff.values())))), 6) if diff else None}
+
+
 def find_curves(model, plate, curves=None, detector=None, face=0):
     """The plate's curves and where they came from: ``curves`` ({name: (n, 2) px}, or a curve
     file), else PLATE.curves.json beside the plate, else the landmark detector (whose face
     oval then becomes the plate's mask when it has none; ``detector(image_srgb, name)`` ->
     (478, 2) px replaces the single-image one, e.g. a ``fit.landmarks.LandmarkTracker`` in
-    a sequence; face: which face the detector fits, 0 the first found, the whole frame first,
+    a sequence, and its attribute ``scores``, if any, the peer's ARKit scores that the plate
+    keeps as ``peer_arkit``, as the single-image detector's; face: which face the detector fits, 0 the first found, the whole frame first,
     then crops around face proposals, largest first: ``fit.landmarks.detect_landmarks``).
     Curves mostly outside the plate are an InvfaceError
     (``fit.curves.check_curves``). Returns ({name: (n, 2) px}, source)."""
     from ..fit.curves import check_curves, read_curves
-    from ..fit.landmarks import curves_from_landmarks, detect_landmarks, face_mask
+    from ..fit.landmarks import curves_from_landmarks, detect_face, face_mask
     from ..io.images import linear_to_srgb
     if isinstance(curves, dict):
         found, source = {k: np.asarray(v, float) for k, v in curves.items()}, "given"
@@ -84,7 +95,10 @@ def find_curves(model, plate, curves=None, detector=None, face=0):
             found, source = read_curves(curves, model, image_size=plate.camera.size), str(curves)
         else:
             image, name = linear_to_srgb(plate.image), str(path or "plate")
-            points = detector(image, name=name) if detector else detect_landmarks(image, name=name, face=face)
+            if detector:
+                points, plate.peer_arkit = detector(image, name=name), dict(getattr(detector, "scores", {}))
+            else:
+                points, plate.peer_arkit = detect_face(image, name=name, face=face)
             if plate.mask is None:
                 plate.mask = face_mask(points, *plate.image.shape[:2])
             found, source = curves_from_landmarks(points), DETECTOR
@@ -296,6 +310,9 @@ class FrameFit:
         extra["notes"] += [f"The {k} model's fit did not finish: {why}" for k, why in self.failed.items()]
         extra["notes"] += [f"Warning: {w}" for w in self.warnings]
         extra["warnings"] = list(self.warnings)
+        if self.plate.peer_arkit:
+            extra["peer_arkit"] = peer_comparison(self.fits[kind].summary()["arkit"], self.plate.peer_arkit) \
+                if kind in self.fits else {"scores": self.plate.peer_arkit}
         if kind in self.truth:
             extra["truth"] = self.truth[kind]
         extra.update(self.record.get(kind, {}))

@@ -36,12 +36,15 @@ def undistort(image, camera: Camera):
 
 @dataclass
 class Plate:
-    """A plate ready to fit: linear image (H, W, 3), undistorted camera, optional mask."""
+    """A plate ready to fit: linear image (H, W, 3), undistorted camera, optional mask, and the
+    landmark detector's own ARKit scores when it found the plate's curves ({name: [0, 1]}:
+    MediaPipe's estimate, a peer's, not truth)."""
 
     image: np.ndarray
     camera: Camera
     path: str = ""
     mask: np.ndarray | None = None
+    peer_arkit: dict | None = None
 
 
 def load_plate(path, camera=None):

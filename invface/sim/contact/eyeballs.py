@@ -4,17 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...model.gaze import fit_sphere
 from .base import ContactModel, penalty, psd, vertex_blocks
-
-
-def fit_sphere(P):
-    """Least-squares sphere (centre (3,), radius) through points P (n,3):
-    |p|^2 = 2 c.p + (r^2 - |c|^2) solved for c and r."""
-    P = np.asarray(P, float)
-    A = np.concatenate([2 * P, np.ones((len(P), 1))], 1)
-    sol = np.linalg.lstsq(A, np.einsum("ni,ni->n", P, P), rcond=None)[0]
-    c = sol[:3]
-    return c, float(np.sqrt(sol[3] + c @ c))
 
 
 def eyeball_spheres(model):

@@ -1,0 +1,82 @@
+"""The USD take (io.usd, ``invface export --format usd``): read back with Pixar's own USD library,
+its mesh, time samples and attributes, and the solved camera through USD's own camera math
+(GfCamera's frustum), against invface's projection."""
+import json
+
+import numpy as np
+import pytest
+
+pxr = pytest.importorskip("pxr")
+
+import invface  # noqa: E402
+from invface.model.arkit import ARKIT_NAMES  # noqa: E402
+from invface.render.camera import Camera  # noqa: E402
+
+
+def _camera():
+    cam = Camera.front_view(640, 480)
+    cam.K[0, 2] += 21.0                         # principal point off centre
+    cam.K[1, 2] -= 13.0
+    cam.K[1, 1] *= 1.02                         # non-square pixels
+    return cam
+
+
+def _clip(tmp_path, model):
+    """A sequence folder of three frames (the middle one flagged) with fit.json and fit.npz."""
+    cam, run = _camera(), tmp_path / "clip"
+    run.mkdir()
+    (run / "run.json").write_text(json.dumps({"frames": ["f0", "f1", "f2"], "fps": 25.0}))
+    surfaces = []
+    for i in range(3):
+        p = model.parameters({"jawOpen": 0.2 * i, "eyeLookOutLeft": 0.1 * i, "jaw": [0.1 * i, 0, 0, 0, 0, 0]})
+        rot, tr = np.array([0.02 * i, -0.1, 0.0]), np.array([0.001 * i, 0.0, 0.0])
+        xr = model.surface_model("blendshape").surface(p) @ invface.model.rig.euler_xyz(rot).T + tr
+        surfaces.append(xr)
+        d = run / f"f{i}" / "blendshape"
+        d.mkdir(parents=True)
+        arkit = dict.fromkeys(ARKIT_NAMES, 0.0) | {"jawOpen": 0.2 * i}
+        d.joinpath("fit.json").write_text(json.dumps({
+            "frame": 10 + i, "arkit": arkit, "rotation": rot.tolist(), "translation": tr.tolist(),
+            "eyes": {"L": {"yaw": 0.05 * i, "pitch": 0.0}, "R": {"yaw": 0.05 * i, "pitch": 0.01}},
+            "flagged": "curves jumped" if i == 1 else ""}))
+        np.savez(d / "fit.npz", surface=xr, triangles=model.triangles, camera=np.array(json.dumps(cam.to_dict())))
+    return run, cam, surfaces
+
+
+def test_a_take_reads_back_in_usd_and_its_camera_projects_as_ours(tmp_path, small_expressive_model):
+    from pxr import Usd, UsdGeom
+    m = small_expressive_model
+    run, cam, surfaces = _clip(tmp_path, m)
+    paths = invface.export(run, formats="usd")
+    assert [p.name for p in paths] == ["face_blendshape.usd"]
+    stage = Usd.Stage.Open(str(paths[0]))
+    assert UsdGeom.GetStageUpAxis(stage) == "Y" and UsdGeom.GetStageMetersPerUnit(stage) == pytest.approx(0.01)
+    assert stage.GetTimeCodesPerSecond() == 25.0 and (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (10, 12)
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Capture/Face"))
+    pts = mesh.GetPointsAttr()
+    assert pts.GetTimeSamples() == [10.0, 12.0]                     # the flagged frame is left to USD
+    for t, x in ((10, surfaces[0]), (12, surfaces[2])):
+        np.testing.assert_allclose(np.array(pts.Get(t)) / 100.0, x, atol=1e-6)
+    halfway = np.array(pts.Get(11)) / 100.0                          # interpolated, not the flagged fit
+    np.testing.assert_allclose(halfway, 0.5 * (surfaces[0] + surfaces[2]), atol=1e-6)
+    idx = np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
+    assert np.array_equal(idx, m.triangles) and set(mesh.GetFaceVertexCountsAttr().Get()) == {3}
+    prim = mesh.GetPrim()
+    assert prim.GetAttribute("arkit:jawOpen").Get(12) == pytest.approx(0.4)
+    assert len([a for a in prim.GetAttributes() if a.GetName().startswith("arkit:")]) == 52
+    assert list(prim.GetAttribute("invface:eyeYawPitch").Get(12)) == pytest.approx([0.1, 0.0, 0.1, 0.01])
+    # the camera: USD's own view and projection matrices put the mesh where ours does
+    gf = UsdGeom.Camera(stage.GetPrimAtPath("/Capture/Camera")).GetCamera(10)
+    V, P = np.array(gf.frustum.ComputeViewMatrix()), np.array(gf.frustum.ComputeProjectionMatrix())
+    h = np.c_[np.array(pts.Get(10)), np.ones(len(surfaces[0]))] @ V @ P
+    ndc = h[:, :2] / h[:, 3:4]
+    uv = np.c_[(ndc[:, 0] + 1) / 2 * cam.width - 0.5, (1 - ndc[:, 1]) / 2 * cam.height - 0.5]
+    np.testing.assert_allclose(uv, cam.project(surfaces[0])[0], atol=1e-3)
+
+
+def test_export_refuses_an_unknown_format(tmp_path):
+    from invface.errors import InvfaceError
+    (tmp_path / "blendshape").mkdir()
+    (tmp_path / "blendshape" / "fit.json").write_text("{}")
+    with pytest.raises(InvfaceError, match="export format 'fbx': use csv, usd"):
+        invface.export(tmp_path, formats="fbx")
