@@ -174,6 +174,12 @@ def test_fit_plate_on_a_folder_fits_the_frames_and_writes_the_sequence_page(smal
     rows = read_livelink_csv(out / "arkit_blendshape.csv")
     assert [r["MouthSmileLeft"] for r in rows] == pytest.approx([fits[f]["arkit"]["mouthSmileLeft"]
                                                                  for f in ("neutral", "smile_blendshape")], abs=1e-6)
+    from pxr import Usd, UsdGeom                           # and as a USD take, a sample per frame
+    stage = Usd.Stage.Open(str(out / "face_blendshape.usd"))
+    face = stage.GetPrimAtPath("/Capture/Face")
+    assert len(UsdGeom.Mesh(face).GetPointsAttr().GetTimeSamples()) == 2
+    assert [face.GetAttribute("arkit:mouthSmileLeft").Get(t) for t in (0, 1)] == pytest.approx(
+        [fits[f]["arkit"]["mouthSmileLeft"] for f in ("neutral", "smile_blendshape")], abs=1e-6)
     # each frame is compared with its truth file (NAME.truth.json beside the plate)
     assert all(s["truth"]["shape_median_mm"] < 0.5 for s in fits.values()), [s["truth"] for s in fits.values()]
     page = (out / "index.html").read_text()
@@ -243,6 +249,7 @@ def test_fit_plate_writes_the_kinds_that_finish_and_exits_0(small_expressive_mod
     from invface.io.livelink import read_livelink_csv      # the kind that finished, in ARKit (one row)
     rows = read_livelink_csv(tmp_path / "out/arkit_blendshape.csv")
     assert len(rows) == 1 and not (tmp_path / "out/arkit_simulation.csv").exists()
+    assert (tmp_path / "out/face_blendshape.usd").is_file() and not (tmp_path / "out/face_simulation.usd").exists()
     _failing_simulation(monkeypatch, kinds=("blendshape", "simulation"))
     assert main(["fit-plate", *args, "-o", str(tmp_path / "none")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -27,7 +27,8 @@ The jaw's roll and yaw (jaw_ry, jaw_rz) and its vertical slide (jaw_ty) have no 
 stay in fit.json's ``jaw``. The built-in head's blendshape named jawOpen is the soft tissue that
 goes with an open jaw (its jaw pose is the fit's jaw_rx), so ARKit's jawOpen reads the jaw.
 
-Controls the model cannot make (the eyes' gaze, tongueOut and others, on the built-in head) are
+The eyeLook controls are blendshapes (the lids) that also turn the eyeballs (``model.gaze``).
+Controls the model cannot make (tongueOut, on the built-in head; any a user's folder lacks) are
 0 in ``arkit_values`` and listed by ``unsupported``.
 """
 from __future__ import annotations

@@ -186,10 +186,11 @@ def write_usd_takes(out, kinds, fps=24.0, single=False):
 
 
 def write_sequence_outputs(out, kinds, fps=0.0):
-    """The sequence's files from its frames' records: curves.csv/json, the Live Link Face CSV and
-    an overlay MP4 per kind, and the sequence page (index.html). Returns their paths."""
+    """The sequence's files from its frames' records: curves.csv/json, the Live Link Face CSV, the
+    USD take and an overlay MP4 per kind, and the sequence page (index.html). Returns their paths."""
     from ..report.sequence import write_sequence_report
     paths = list(write_curves_files(out, kinds)) + write_arkit_csv(out, kinds, fps or 24.0)
+    paths += write_usd_takes(out, kinds, fps or 24.0)
     paths += [p for k in kinds if (p := write_overlay_video(out, k, fps or 24.0)) is not None]
     paths.append(write_sequence_report(out))
     return paths

@@ -20,7 +20,7 @@ from ..fit.lambdas import EQ16_TEMPORAL, TEMPORAL_LAMBDA
 from .clips import open_clip
 from .distributed import fit_sequence_distributed
 from .frames import fit_frames
-from .outputs import write_arkit_csv, write_sequence_outputs
+from .outputs import write_arkit_csv, write_sequence_outputs, write_usd_takes
 from .plates import _say, model_kinds
 from .runs import finish_run, run_hash, start_run
 
@@ -66,12 +66,16 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
             named = lambda test: ", ".join(str(p) for p in paths if test(p.name))
             _say(progress, message="animation curves: " + named(lambda n: n.startswith("curves.")))
             _say(progress, message="ARKit curves (Live Link Face CSV): " + named(lambda n: n.startswith("arkit_")))
+            _say(progress, message="the take as USD (mesh per frame, camera, ARKit controls): "
+                 + named(lambda n: n.endswith(".usd")))
             if any(p.suffix == ".mp4" for p in paths):
                 _say(progress, message="overlay video(s) (plate | render | wipe): " + named(lambda n: n.endswith(".mp4")))
             _say(progress, message=f"sequence report: {paths[-1]}")
         else:
             for p in write_arkit_csv(out, kinds, clip.fps or 24.0, single=True):
                 _say(progress, message=f"ARKit controls (Live Link Face CSV): {p}")
+            for p in write_usd_takes(out, kinds, clip.fps or 24.0, single=True):
+                _say(progress, message=f"the fit as USD (mesh, camera, ARKit controls): {p}")
     return rows
 
 
