@@ -500,9 +500,9 @@ def without_eyes(mask, curves, shape):
     The model's eyeballs turn with the gaze that the plate's irises set (the curve term's iris
     rows, ``fit.curves.IRIS_CURVES``), but they carry no gradient in the image Jacobian (held
     still there); the iris and the pupil moving with the pose put a 25 % error into the
-    translation's Jacobian column (1677 against 2241 from differences) on the small head. The lids' edges against the eyes stay in the term where
-    the model's lids are more open than the plate's. A photo's detector mask has the openings
-    removed already (``landmarks.face_mask``)."""
+    translation's Jacobian column (1677 against 2241 from differences) on the small head. The
+    lids' edges against the eyes stay in the term where the model's lids are more open than the
+    plate's. A photo's detector mask has the openings removed already (``landmarks.face_mask``)."""
     import cv2
     out = (np.ones(shape, np.float32) if mask is None else np.asarray(mask, np.float32).reshape(shape)).copy()
     for up, lo in EYE_OPENINGS:
