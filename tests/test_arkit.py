@@ -41,7 +41,7 @@ def test_values_of_the_built_in_heads_controls_and_jaw(small_expressive_model):
     assert a["jawOpen"] == pytest.approx(0.3 / JAW_UPPER[0]) and a["jawLeft"] == pytest.approx(0.004 / 0.008)
     assert a["jawRight"] == 0.0 and a["jawForward"] == 0.0          # clipped at 0: it moved back
     missing = unsupported(m.blendshape_names)
-    assert missing == ["tongueOut"]
+    assert missing == []
     d = vec.to_dict(p.tolist() + [0.0] * 6)
     assert d["arkit"] == a and d["arkit_unsupported"] == missing
 

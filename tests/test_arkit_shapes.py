@@ -32,11 +32,11 @@ def stored():
 
 
 def test_the_template_speaks_arkit(small_expressive_model):
-    """51 of ARKit's 52 controls are the template's blendshapes, by ARKit's own names; the
-    jaw's four also read the jaw bone; only tongueOut is missing."""
+    """ARKit's 52 controls are the template's blendshapes, by ARKit's own names; the jaw's
+    four also read the jaw bone."""
     names = small_expressive_model.blendshape_names
-    assert set(names) == set(ARKIT_NAMES) - {"tongueOut"} and len(names) == 51
-    assert unsupported(names) == ["tongueOut"]
+    assert set(names) == set(ARKIT_NAMES) and len(names) == 52
+    assert unsupported(names) == []
     vals = arkit_values(names, np.eye(len(names))[names.index("mouthRollLower")], np.zeros(6))
     assert vals["mouthRollLower"] == 1.0 and sum(vals.values()) == 1.0
 
@@ -153,7 +153,7 @@ def test_old_names_read_as_arkit_controls(small_expressive_model):
 @pytest.mark.parametrize("control, least", [("mouthRollLower", 0.5)])
 def test_fit_plate_recovers_a_rolled_lip(small_expressive_model, control, least):
     """A plate rendered with the lower lip rolled in at 0.7 (a slight smile beside it), fitted
-    with all 51 controls free from the curves and the shading (Eq. 15-16): the lips' vertices
+    with all 52 controls free from the curves and the shading (Eq. 15-16): the lips' vertices
     come back within 0.6 mm (median), the roll is the fit's largest control, above ``least``.
     (mouthPressLeft at 0.7, which moves the lips 4 mm at 1.0 mostly along the view, comes back
     at 0.08-0.32 behind the smile: not asserted.)"""
@@ -199,3 +199,30 @@ def test_lids_slide_on_the_eyeballs(small_expressive_model):
         moved = np.linalg.norm(x - m.neutral, axis=1)[lid]
         assert moved.max() > 1e-3, name
         np.testing.assert_allclose(np.linalg.norm(x[lid] - EYE_CENTER, axis=1), rest[lid], atol=1e-9)
+
+
+def test_tongue_out_shows_the_tongue_past_the_lips(small_expressive_model):
+    """tongueOut 1 with the jaw open slides the tongue's tip out past the lower lip (12 mm in
+    front of its inner edge at rest, carried by the jaw), thinner, resting on the lip;
+    the skin does not move in either kind (the tongue is a rendered part, not simulated)."""
+    from invface.model.tongue import OUT_PAST_LIPS
+    m = small_expressive_model
+    tongue, teeth = m.parts.part("tongue"), m.parts.part("lower_teeth")
+    jaw = [0.3, 0, 0, 0, 0, 0]
+    rest, out = (m.parts_positions(m.parameters({"tongueOut": w, "jaw": jaw})) for w in (0.0, 1.0))
+    lip = m.surface_model("blendshape").surface(m.parameters({"jaw": jaw}))[
+        np.asarray(m.curves["lip_inner_lower"])[len(m.curves["lip_inner_lower"]) // 2]]
+    tip = out[tongue][np.argmax(out[tongue][:, 2])]
+    assert rest[tongue][:, 2].max() < lip[2] - 0.01                  # at rest, inside the mouth
+    assert tip[2] > lip[2] + 0.6 * OUT_PAST_LIPS
+    over = np.abs(out[tongue][:, 2] - lip[2]) < 0.002                 # where it passes the lip: on it
+    assert over.sum() > 5 and out[tongue][over, 1].min() > lip[1] - 0.0015
+    front = out[tongue][:, 2] > out[teeth][:, 2].max()                # the part out of the mouth
+    assert front.sum() > 10 and np.ptp(out[tongue][front, 0]) < 0.8 * np.ptp(rest[tongue][:, 0])
+    others = np.ones(len(rest), bool)
+    others[tongue] = False
+    assert np.array_equal(rest[others], out[others])
+    p0, p1 = m.parameters({"jaw": jaw}), m.parameters({"tongueOut": 1.0, "jaw": jaw})
+    for kind in ("blendshape", "simulation"):
+        sm = m.surface_model(kind)
+        assert np.abs(sm.surface(p1) - sm.surface(p0)).max() < 1e-7, kind

@@ -376,8 +376,8 @@ def test_imported_jaw_shape_drives_the_simulation(small_expressive_model, tmp_pa
     assert abs(jaw[0] - made) < 0.05 and np.abs(jaw[1:3]).max() < 0.02, (jaw, made)
     assert set(res.stats["jaw_split"]) == {"jawOpen"}
     assert model.meta["blendshape_jaw"]["mouthSmile_L"] == [0.0] * 6
-    # the 49 ARKit controls the folder lacks come from the template, and the summary says so
-    assert model.blendshape_names[:2] == ["jawOpen", "mouthSmile_L"] and len(model.blendshape_names) == 51
+    # the 50 ARKit controls the folder lacks come from the template, and the summary says so
+    assert model.blendshape_names[:2] == ["jawOpen", "mouthSmile_L"] and len(model.blendshape_names) == 52
     assert set(res.stats["filled_from_template"]) == set(tpl.blendshape_names) - {"jawOpen", "mouthSmileLeft"}
     filled = model.blendshape_names.index("mouthRollLower")
     assert np.abs(model.blendshapes[filled] - tpl.blendshapes[tpl.blendshape_names.index("mouthRollLower")]).max() < 2e-3

@@ -17,6 +17,7 @@ Named formats (``export(path, data, format=NAME)``), for files whose suffix says
 | format   | data                                                | writer                          |
 |----------|-----------------------------------------------------|---------------------------------|
 | livelink | {"frames": [...], "arkit_names": [...], "fps": f}   | livelink.write_livelink_csv     |
+| usdskel  | a rig and its take (``usd.write_usd_rig``)           | usd.write_usd_rig               |
 """
 from __future__ import annotations
 
@@ -116,3 +117,11 @@ def _livelink(path, data, **_):
 
 
 register_format("livelink", _livelink)
+
+
+def _usdskel(path, data, **_):
+    from .usd import write_usd_rig
+    write_usd_rig(path, data)
+
+
+register_format("usdskel", _usdskel)

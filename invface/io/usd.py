@@ -1,8 +1,9 @@
-"""A fitted take as a USD stage (Pixar's ``usd-core``): the face as an animated mesh, the solved
-camera, and the ARKit controls as animated attributes, for usdview, Houdini, Maya, Blender,
-Unreal and Omniverse.
+"""A fitted take as USD (Pixar's ``usd-core``), for usdview, Houdini, Maya, Blender, Unreal and
+Omniverse: ``write_usd``, the face as an animated mesh (a point cache: exactly the fit, either
+kind), and ``write_usd_rig``, the actor's blendshape rig in UsdSkel animated by the fit's
+controls (an animator's rig: re-timed, edited, retargeted by the blendshapes' ARKit names).
 
-The stage (``write_usd``):
+The point cache's stage (``write_usd``):
 
     /Capture                  Xform, the default prim; the stage is +Y up in centimetres (USD's
                               fallback unit, metersPerUnit 0.01, so lens values are in mm)
@@ -129,3 +130,94 @@ def _camera(stage, camera, Gf, UsdGeom):
         usd.GetPrim().GetAttribute(k).Set(float(v))
     usd.CreateClippingRangeAttr(Gf.Vec2f(0.01, 100.0))
     usd.CreateProjectionAttr(UsdGeom.Tokens.perspective)
+
+
+def write_usd_rig(path, data):
+    """Write the take as an animatable USD rig (UsdSkel) to ``path`` atomically: the actor's
+    neutral skin bound to a skeleton of two joints, root (the head's pose) and root/jaw (the
+    jaw's rigid transform about its pivot), with the model's skinning weights between them, and
+    its blendshapes by name (ARKit's, on the built-in head) as UsdSkel BlendShapes; a
+    SkelAnimation samples the weights and both joints per frame. USD evaluates it as the
+    blendshape rig of paper 000 Eq. 1-2: x = H T(j)(n + B b), linear blend skinning between the
+    head and the jaw. data: {"fps", "camera" (as ``write_usd``), "neutral" (V, 3) m, "triangles"
+    (F, 3), "names" (K,), "deltas" (K, V, 3) m, "jaw_weights" (V,), "frames": [{"frame",
+    "weights" (K,), "jaw_matrix" (4, 4), "rotation" (3,) rad Euler XYZ, "translation" (3,) m}]}.
+    Returns the Path."""
+    Gf, Sdf, Usd, UsdGeom, Vt = _pxr()
+    from pxr import UsdSkel
+    from pathlib import Path
+    frames = list(data["frames"])
+    if not frames:
+        raise ConfigError(f"{path}: no frames to write")
+    with atomic_path(path) as tmp:
+        stage = Usd.Stage.CreateNew(str(tmp))
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+        UsdGeom.SetStageMetersPerUnit(stage, 1.0 / UNITS_PER_M)
+        fps = float(data.get("fps") or 24.0)
+        stage.SetTimeCodesPerSecond(fps)
+        stage.SetFramesPerSecond(fps)
+        stage.SetStartTimeCode(float(frames[0]["frame"]))
+        stage.SetEndTimeCode(float(frames[-1]["frame"]))
+        stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/Capture").GetPrim())
+        UsdSkel.Root.Define(stage, "/Capture/Rig")
+        skel = UsdSkel.Skeleton.Define(stage, "/Capture/Rig/Skeleton")
+        joints = Vt.TokenArray(["root", "root/jaw"])
+        identity = Vt.Matrix4dArray([Gf.Matrix4d(1.0), Gf.Matrix4d(1.0)])
+        skel.CreateJointsAttr(joints)
+        skel.CreateBindTransformsAttr(identity)
+        skel.CreateRestTransformsAttr(identity)
+        mesh = _rig_mesh(stage, data, Gf, UsdGeom, Vt, UsdSkel)
+        anim = _rig_animation(stage, frames, data["names"], joints, Gf, Vt, UsdSkel)
+        UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+        UsdSkel.BindingAPI(mesh.GetPrim()).CreateSkeletonRel().SetTargets([skel.GetPath()])
+        _camera(stage, data["camera"], Gf, UsdGeom)
+        stage.GetRootLayer().Save()
+    return Path(path)
+
+
+def _rig_mesh(stage, data, Gf, UsdGeom, Vt, UsdSkel):
+    """The neutral skin (cm) with its joint weights (root 1 - w, jaw w) and its blendshapes
+    (each holding the vertices it moves, offsets in cm)."""
+    n = np.asarray(data["neutral"], float) * UNITS_PER_M
+    tri = np.asarray(data["triangles"], np.int32)
+    mesh = UsdGeom.Mesh.Define(stage, "/Capture/Rig/Face")
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(n.astype(np.float32)))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(tri)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray(tri.ravel().tolist()))
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*n.min(0).tolist()), Gf.Vec3f(*n.max(0).tolist())]))
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    w = np.clip(np.asarray(data["jaw_weights"], float), 0, 1)
+    binding.CreateJointIndicesPrimvar(False, 2).Set(Vt.IntArray(np.tile([0, 1], len(w)).tolist()))
+    binding.CreateJointWeightsPrimvar(False, 2).Set(Vt.FloatArray(np.stack([1 - w, w], 1).ravel().tolist()))
+    binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1.0))
+    targets = []
+    for name, d in zip(data["names"], np.asarray(data["deltas"], float)):
+        moved = np.flatnonzero(np.abs(d).max(1) > 0)
+        shape = UsdSkel.BlendShape.Define(stage, mesh.GetPath().AppendChild(name))
+        shape.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy((d[moved] * UNITS_PER_M).astype(np.float32)))
+        shape.CreatePointIndicesAttr(Vt.IntArray(moved.tolist()))
+        targets.append(shape.GetPath())
+    binding.CreateBlendShapesAttr(Vt.TokenArray(list(data["names"])))
+    binding.CreateBlendShapeTargetsRel().SetTargets(targets)
+    return mesh
+
+
+def _rig_animation(stage, frames, names, joints, Gf, Vt, UsdSkel):
+    """The SkelAnimation: per frame the head's pose (root) and the jaw's transform relative to
+    it (translations in cm), and the blendshape weights."""
+    from ..model.rig import euler_xyz
+    anim = UsdSkel.Animation.Define(stage, "/Capture/Rig/Skeleton/Animation")
+    anim.CreateJointsAttr(joints)
+    anim.CreateBlendShapesAttr(Vt.TokenArray(list(names)))
+    weights = anim.CreateBlendShapeWeightsAttr()
+    for f in frames:
+        t = float(f["frame"])
+        H = np.eye(4)
+        H[:3, :3], H[:3, 3] = euler_xyz(np.asarray(f["rotation"], float)), np.asarray(f["translation"], float)
+        M = np.array(f["jaw_matrix"], float)
+        H[:3, 3] *= UNITS_PER_M
+        M[:3, 3] *= UNITS_PER_M
+        anim.SetTransforms(Vt.Matrix4dArray([_matrix(Gf, H), _matrix(Gf, M)]), t)
+        weights.Set(Vt.FloatArray(np.asarray(f["weights"], float).tolist()), t)
+    return anim

@@ -6,7 +6,7 @@ and MetaHuman) names 52 controls, each a value in [0, 1]. Left and Right are the
 Face recording.
 
 A model's blendshapes reach ARKit by name:
-- a shape named with an ARKit name is that control: the built-in head's 51 shapes
+- a shape named with an ARKit name is that control: the built-in head's 52 shapes
   (``template.arkit_shapes``) are named so;
 - ICT-FaceKit's style, ``mouthSmile_L`` / ``_R``, is ``mouthSmileLeft`` / ``Right``;
 - the FACS-style names of the built-in head before its ARKit shapes (``LEGACY``; actor bundles
@@ -27,9 +27,10 @@ The jaw's roll and yaw (jaw_ry, jaw_rz) and its vertical slide (jaw_ty) have no 
 stay in fit.json's ``jaw``. The built-in head's blendshape named jawOpen is the soft tissue that
 goes with an open jaw (its jaw pose is the fit's jaw_rx), so ARKit's jawOpen reads the jaw.
 
-The eyeLook controls are blendshapes (the lids) that also turn the eyeballs (``model.gaze``).
-Controls the model cannot make (tongueOut, on the built-in head; any a user's folder lacks) are
-0 in ``arkit_values`` and listed by ``unsupported``.
+The eyeLook controls are blendshapes (the lids) that also turn the eyeballs (``model.gaze``);
+tongueOut is a blendshape with no skin offset that moves the tongue (``model.tongue``). Controls
+a model cannot make (those an old actor bundle lacks) are 0 in ``arkit_values`` and listed by
+``unsupported``.
 """
 from __future__ import annotations
 

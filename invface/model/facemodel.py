@@ -96,14 +96,18 @@ class FaceModel:
     def parts_positions(self, w=None):
         """Positions (P,3) m of the inner parts (``parts``) before the head pose, for controls
         w (Controls, dict, or a parameter vector p (K+6,)): the upper teeth and eyes stay with
-        the cranium, the lower teeth and tongue follow the jaw, and each eyeball turns about
-        its centre by the eyeLook controls' gaze (``model.gaze``). None without parts."""
+        the cranium, the lower teeth and tongue follow the jaw, the tongue slides out by
+        tongueOut (``model.tongue``), and each eyeball turns about its centre by the eyeLook
+        controls' gaze (``model.gaze``). None without parts."""
         from .gaze import Eyes
+        from .rig import skin
+        from .tongue import Tongue
         if self.parts is None:
             return None
         K = len(self.blendshape_names)
         p = w if isinstance(w, np.ndarray) and w.shape == (K + 6,) else self.parameters(w)
-        return Eyes(self).turn_parts(self.parts, self.parts.posed(self.jaw_matrix(p[K:])), p)
+        rest = Tongue(self).rest_parts(self.parts.vertices, p)
+        return Eyes(self).turn_parts(self.parts, skin(rest, self.parts.jaw_weights, self.jaw_matrix(p[K:])), p)
 
     def surface(self, w=None, kind="blendshape") -> np.ndarray:
         """Surface vertex positions x(w) (V,3) in metres, before the rigid head pose.

@@ -149,8 +149,9 @@ def livelink_eyes(eyes):
 
 def take_frames(run, kind, single):
     """The frames of one kind for a USD take (``io.usd.write_usd``): fit.json's values with each
-    frame's posed surface from its fit.npz, flagged frames left out (USD interpolates them), and
-    the first frame's camera and triangles. Returns (frames, triangles, camera dict) or None."""
+    frame's posed surface from its fit.npz (and the fit.json itself as "record"), flagged frames
+    left out (USD interpolates them), and the first frame's camera and triangles. Returns
+    (frames, triangles, camera dict) or None."""
     if single:
         f = Path(run) / kind / "fit.json"
         recs = [dict(json.loads(f.read_text()), _dir=str(f.parent))] if f.is_file() else []
@@ -168,7 +169,7 @@ def take_frames(run, kind, single):
         e = livelink_eyes(r.get("eyes"))
         frames.append({"frame": r.get("frame", i), "points": points, "arkit": r.get("arkit", {}),
                        "rotation": r.get("rotation", [0, 0, 0]), "translation": r.get("translation", [0, 0, 0]),
-                       "eyes": e[[0, 1, 3, 4]]})
+                       "eyes": e[[0, 1, 3, 4]], "record": r})
     return (frames, tri, cam) if frames else None
 
 
@@ -185,6 +186,46 @@ def write_usd_takes(out, kinds, fps=24.0, single=False):
     return paths
 
 
+def rig_frames(run, kind, single, model):
+    """The frames of one kind for a USD rig (``io.usd.write_usd_rig``): each fit.json's weights
+    by ``model``'s blendshape names, its jaw's transform and the head's pose, flagged frames left
+    out. None when the kind has no frames; InvfaceError when the fits were made with another
+    model (their surfaces have another vertex count)."""
+    from ..errors import InvfaceError
+    from ..model.controls import FitVector
+    take = take_frames(run, kind, single)
+    if take is None:
+        return None
+    frames, _, _ = take
+    if len(frames[0]["points"]) != len(model.neutral):
+        raise InvfaceError(f"{run}: its {kind} fits have {len(frames[0]['points'])} vertices, the model "
+                           f"{len(model.neutral)}: pass the model the run was fitted with (--model)")
+    vec = FitVector.of(model)
+    out = []
+    for f in frames:
+        p = vec.unpack(vec.from_dict(f["record"], what=f"{run} {kind} frame {f['frame']}"))[0]
+        out.append({"frame": f["frame"], "weights": p[vec.weights], "jaw_matrix": model.jaw_matrix(p[vec.jaw]),
+                    "rotation": f["rotation"], "translation": f["translation"]})
+    return out
+
+
+def write_usd_rigs(out, kinds, model, fps=24.0, single=False):
+    """out/rig_<kind>.usd per kind: the model's blendshape rig in UsdSkel animated by the kind's
+    fitted controls (``io.usd.write_usd_rig``). Returns the paths."""
+    from ..io.exporters import export
+    paths = []
+    for kind in kinds:
+        frames = rig_frames(out, kind, single, model)
+        if frames is None:
+            continue
+        cam = take_frames(out, kind, single)[2]
+        data = {"fps": fps or 24.0, "camera": cam, "neutral": model.neutral, "triangles": model.triangles,
+                "names": list(model.blendshape_names), "deltas": model.blendshapes,
+                "jaw_weights": model.jaw_weights, "frames": frames}
+        paths.append(export(Path(out) / f"rig_{kind}.usd", data, format="usdskel"))
+    return paths
+
+
 def write_sequence_outputs(out, kinds, fps=0.0):
     """The sequence's files from its frames' records: curves.csv/json, the Live Link Face CSV, the
     USD take and an overlay MP4 per kind, and the sequence page (index.html). Returns their paths."""
@@ -196,14 +237,15 @@ def write_sequence_outputs(out, kinds, fps=0.0):
     return paths
 
 
-EXPORT_FORMATS = ("csv", "usd")
+EXPORT_FORMATS = ("csv", "usd", "usdskel")
 
 
-def export(run_dir, formats=("csv",), fps=None):
+def export(run_dir, formats=("csv",), fps=None, model=None):
     """Write an existing fit run's exports into its folder: "csv" is the Live Link Face CSV per
     kind (``write_arkit_csv``: arkit_<kind>.csv), "usd" the take as a USD stage per kind
     (``write_usd_takes``: face_<kind>.usd: the fitted face's points per frame, the solved camera,
-    the ARKit controls). run_dir: a fit-plate output folder (a photo's,
+    the ARKit controls), "usdskel" the model's rig animated by the fit (``write_usd_rigs``:
+    rig_<kind>.usd; model: the model the run was fitted with, see ``run_model``). run_dir: a fit-plate output folder (a photo's,
     with <kind>/fit.json, or a sequence's, with <frame>/<kind>/fit.json); fps: the clip's frame
     rate (default run.json's, else 24). Returns the paths written; InvfaceError naming the folder
     when it holds no fit, or an unknown format."""
@@ -223,4 +265,20 @@ def export(run_dir, formats=("csv",), fps=None):
                            "<frame>/<kind>/fit.json): give a fit-plate output folder")
     rate = fps or record.get("fps") or 24.0
     paths = write_arkit_csv(run, kinds, rate, single=bool(single)) if "csv" in formats else []
-    return paths + (write_usd_takes(run, kinds, rate, single=bool(single)) if "usd" in formats else [])
+    paths += write_usd_takes(run, kinds, rate, single=bool(single)) if "usd" in formats else []
+    if "usdskel" in formats:
+        paths += write_usd_rigs(run, kinds, run_model(run, model), rate, single=bool(single))
+    return paths
+
+
+def run_model(run, model=None):
+    """The model a run was fitted with: ``model`` (a FaceModel or a bundle path) when given, else
+    the run's actor.npz (the identity-adapted head), else the built-in head."""
+    from ..model.facemodel import FaceModel
+    if model is not None:
+        return model if isinstance(model, FaceModel) else FaceModel.load(model)
+    actor = Path(run) / "actor.npz"
+    if actor.is_file():
+        return FaceModel.load(actor)
+    from ..template import build
+    return build()

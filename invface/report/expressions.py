@@ -11,9 +11,9 @@ from ..render.preview import look_at_camera, render_meshes, to_srgb8
 from .preview import SKIN, VIEWS, parts_meshes
 
 
-# correctives that mean something only over another control: ARKit's mouthClose closes the
-# lips of an open jaw, and is shown over jawOpen 1.0
-SHOWN_OVER = {"mouthClose": "jawOpen"}
+# controls that mean something only over another: ARKit's mouthClose closes the lips of an
+# open jaw, and tongueOut shows the tongue through an open mouth; both are shown over jawOpen 1.0
+SHOWN_OVER = {"mouthClose": "jawOpen", "tongueOut": "jawOpen"}
 
 
 def blendshape_pose(model, name):

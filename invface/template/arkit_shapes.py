@@ -5,7 +5,8 @@ skin at resolution 1, derived from ICT-FaceKit (MIT; its licence is ``data/LICEN
 by ``scripts/derive_arkit_shapes.py``. ICT-FaceKit has no tongueOut, and its two cheekPuff and
 browInnerUp halves are summed into ARKit's one control each. The template replaces the two
 eyeBlink shapes with its own kinematic blink (``expressions.add_blinks``), which closes the
-lids onto the slit they were opened from.
+lids onto the slit they were opened from. tongueOut, the 52nd, is a shape with no skin offset:
+it moves the tongue part out of the mouth (``model.tongue``).
 
 As paper 000 has it, the blendshapes are sculpted and drive the muscle simulation through
 their tracks (Eq. 7-11). ``ARKIT_MUSCLES`` names the muscles each control engages, with the
@@ -13,7 +14,7 @@ activation that the shape is taken to need: they calibrate each muscle's activat
 curve (Eq. 9, ``expressions.calibrate_activation_curves``) and are stored as the shapes'
 ``blendshape_activations``. Controls no facial muscle makes (the jaw's, which the jaw bone makes;
 cheekPuff, which is air; the gaze's lids and eyeWide, which are the eyeball's and the levator
-palpebrae's) engage none.
+palpebrae's; tongueOut, the tongue's own muscles) engage none.
 
 A template at another resolution takes the offsets by closest point on the stored skin. The
 closed mouth's slit has its upper and lower lips' vertices at the same points: there each
@@ -34,6 +35,7 @@ from .expressions import activations_for
 
 DATA = Path(__file__).parent / "data" / "arkit_ict.npz"
 KINEMATIC = ("eyeBlinkLeft", "eyeBlinkRight")      # the template makes these itself
+TONGUE = "tongueOut"       # no skin offset: it moves the tongue part (``model.tongue``)
 
 # ARKit control: ({muscle base name: activation}, sides); sides 'L'/'R' engage only the actor's
 # left/right paired muscles, 'LR' both; midline muscles (procerus, orbicularis oris) always.
@@ -84,6 +86,7 @@ ARKIT_MUSCLES = {
     "mouthUpperUpRight": ({"levator_labii_superioris": 0.8}, "R"),
     "noseSneerLeft": ({"levator_labii_superioris_alaeque_nasi": 0.8, "nasalis": 0.6, "procerus": 0.5}, "L"),
     "noseSneerRight": ({"levator_labii_superioris_alaeque_nasi": 0.8, "nasalis": 0.6, "procerus": 0.5}, "R"),
+    "tongueOut": ({}, "LR"),
 }
 
 
@@ -157,11 +160,12 @@ def add_arkit_shapes(model, path=DATA):
     D = slide_on_eyeballs(model.neutral, carry(shapes, model.neutral, model.triangles), eyes, EYE_RADIUS)
     keep = [k for k, n in enumerate(shapes["names"]) if n not in KINEMATIC]
     names = [shapes["names"][k] for k in keep]
-    model.blendshape_names = names
-    model.blendshapes = D[keep]
-    model.blendshape_activations = np.array([activations(n, model.muscles) for n in names])
+    model.blendshape_names = names + [TONGUE]
+    model.blendshapes = np.concatenate([D[keep], np.zeros((1,) + D.shape[1:])])
+    model.blendshape_activations = np.array([activations(n, model.muscles) for n in model.blendshape_names])
     stats = {n: {"sculpted": "ICT-FaceKit", "max_displacement_mm": float(np.linalg.norm(d, axis=1).max() * 1000)}
              for n, d in zip(names, model.blendshapes)}
-    model.meta = {**model.meta, "blendshape_jaw": {n: shapes["jaw"][k].tolist() for n, k in zip(names, keep)},
-                  "blendshape_sims": stats}
+    stats[TONGUE] = {"sculpted": "none: the tongue part moves (model.tongue)", "max_displacement_mm": 0.0}
+    jaw = {n: shapes["jaw"][k].tolist() for n, k in zip(names, keep)}
+    model.meta = {**model.meta, "blendshape_jaw": {**jaw, TONGUE: [0.0] * 6}, "blendshape_sims": stats}
     return model
