@@ -195,3 +195,23 @@ def test_astronaut_photo_pose_and_light(small_expressive_model):
     assert dc.min() > 0 and dc.max() / dc.min() < 1.4            # all-channel gauge: blue DC was 3.6x red
     assert np.mean(cal.albedo < 0) < 0.01                          # no black scalp (was 41 %)
     assert cal.history[-1]["rms"] < 0.09
+
+
+def test_the_prior_measures_the_jaw_in_its_range(small_expressive_model):
+    """Eq. 15's prior charges a jaw slide or twist at its bound what it charges a blendshape at
+    weight 1 (ARKit's jawLeft/Right/Forward are those ratios), and the hinge in rad: 8 mm of
+    slide was all but free in metres and real-photo fits slid the jaw to its bounds."""
+    from invface.fit.priors import regulariser
+    from invface.model.controls import FitVector
+    from invface.model.rig import JAW_UPPER
+    vec = FitVector.of(small_expressive_model)
+    cost = {}
+    for name, i, v in (("weight", 0, 1.0), ("hinge", vec.K, 0.3), ("forward", vec.K + 5, JAW_UPPER[5]),
+                       ("yaw", vec.K + 1, JAW_UPPER[1])):
+        z = np.zeros(vec.size)
+        z[i] = v
+        r, J = regulariser(z, vec, 3600.0)
+        cost[name] = float(r @ r)
+        assert np.allclose(J[:, vec.controls] @ z[vec.controls], r)
+    assert cost["forward"] == pytest.approx(cost["weight"]) and cost["yaw"] == pytest.approx(cost["weight"])
+    assert cost["hinge"] == pytest.approx(3600.0 * 0.09)

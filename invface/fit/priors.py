@@ -52,12 +52,26 @@ def prior_rows(z, prior):
     return w * (np.asarray(z, float) - c), np.diag(w)
 
 
+def prior_units(vec):
+    """(P,): the unit in which the prior measures each control: 1 for the blendshape weights and
+    the jaw's hinge (rad), the bound of its range for the jaw's other five DOF
+    (``rig.JAW_LOWER`` / ``JAW_UPPER``: 0.15 rad of yaw and roll, 8 mm of slide), so that a DOF at
+    its bound costs what a weight of 1 does (ARKit's jawLeft/Right/Forward are those ratios). In
+    rad and m they were all but free: 8 mm cost what a weight of 0.008 does, and on real photos
+    the curve fit slid the jaw to its 8 mm bounds to trace the head's outline (jawForward 1.0
+    where the photo's jaw is at rest)."""
+    from ..model.rig import JAW_LOWER, JAW_UPPER
+    u = np.ones(vec.P)
+    u[vec.jaw][1:] = np.maximum(np.abs(JAW_LOWER), np.abs(JAW_UPPER))[1:]
+    return u
+
+
 def regulariser(z, vec, lam, center=None, relief=None):
-    """Rows sqrt(lam) (p - center) (P,) and their Jacobian (P, vec.size): the lambda |w|^2
-    terms of Eq. 13 and 15 and Eq. 16's lambda_2 |w - w^|^2 (center: default 0); ``relief``
-    (P,): factors on lam per control (``gaze_relief``)."""
+    """Rows sqrt(lam) (p - center) / units (P,) and their Jacobian (P, vec.size): the lambda |w|^2
+    terms of Eq. 13 and 15 and Eq. 16's lambda_2 |w - w^|^2 (center: default 0), each control in
+    its ``prior_units``; ``relief`` (P,): factors on lam per control (``gaze_relief``)."""
     c = 0 if center is None else center
-    s = np.sqrt(lam * (1.0 if relief is None else np.asarray(relief, float)))
+    s = np.sqrt(lam * (1.0 if relief is None else np.asarray(relief, float))) / prior_units(vec)
     J = np.zeros((vec.P, vec.size))
     J[:, vec.controls] = np.diag(np.broadcast_to(s, (vec.P,)))
     return s * (np.asarray(z, float)[vec.controls] - c), J
