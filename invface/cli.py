@@ -324,6 +324,8 @@ def cmd_fit_plate(args):
         from .pipeline.distributed import scheduler_security
         security = scheduler_security(args.scheduler, args.tls_ca, args.tls_cert, args.tls_key, args.insecure)
     model = _load_model(args.model, args.resolution)
+    # a given calibration is read before any work (the identity keeps the vertex count)
+    given = Calibration.load(args.calib, vertex_count=len(model.neutral)) if args.calib else None
     clip = open_clip(args.plate, args.frames, args.camera)
     print(clip.describe(), flush=True)
     kinds = model_kinds(args.model_kind)
@@ -369,8 +371,8 @@ def cmd_fit_plate(args):
                                f"({fit.describe()})")
         model = FaceModel.load(actor)      # as a resumed run reads it: the same bytes, the same run hash
         run["identity_from"] = frame.digest
-    if args.calib:
-        cal = Calibration.load(args.calib, vertex_count=len(model.neutral))
+    if given is not None:
+        cal = given
     else:
         saved = out / "calib.npz"
         if saved.is_file() and all(before.get(k) == v for k, v in mine.items()):

@@ -20,6 +20,7 @@ pixel)::
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -89,7 +90,12 @@ def read_curves(path, model, image_size=None):
     if unknown:
         raise InvfaceError(f"{path}: unknown curve name(s) {unknown}; the model's curves are "
                            f"{sorted(model.curves)}")
-    if image_size is not None and "image_size" in data and list(data["image_size"]) != list(image_size):
+    size = data.get("image_size")
+    if size is not None and not (isinstance(size, list) and len(size) == 2
+                                 and all(isinstance(v, int) and v > 0 for v in size)):
+        raise InvfaceError(f"{path}: \"image_size\" is {json.dumps(size)}, not [width, height] in pixels: "
+                           "fix it or leave it out")
+    if image_size is not None and size is not None and list(size) != list(image_size):
         raise InvfaceError(f"{path}: curves were drawn on a {data['image_size']} image, the plate is "
                            f"{list(image_size)}")
     out = {}

@@ -78,7 +78,7 @@ def fit_scan(scan, model=None, kind="blendshape", mode="correspondence", lam=EQ1
     "blendshape" or "simulation"; mode: "correspondence" (the model's topology) or "nearest"
     (any mesh); progress: each dogleg iteration's log entry. Other options go to
     ``fit.scan.fit_scan``. Returns a ScanResult."""
-    from ..errors import ConfigError
+    from ..errors import ConfigError, MeshError
     from ..fit.scan import fit_scan as fit
     from ..io.meshes import read_mesh
     from ..morph.target import UNITS, detect_unit
@@ -88,6 +88,10 @@ def fit_scan(scan, model=None, kind="blendshape", mode="correspondence", lam=EQ1
         name, (V, F) = str(scan), read_mesh(scan)
     else:
         name, (V, F) = "scan", (np.asarray(scan[0], float), None if scan[1] is None else np.asarray(scan[1]))
+    bad = ~np.all(np.isfinite(V), axis=1)
+    if bad.any():           # before the unit: a NaN's bounding box is no size
+        raise MeshError(f"{name}: {int(bad.sum())} of its {len(V)} vertices are not finite (NaN or inf), e.g. "
+                        f"vertex {int(np.flatnonzero(bad)[0])}: repair or remove them and export the scan again")
     if unit is None:
         unit, source = detect_unit(V, name)[0], "found from its size"
     elif unit not in UNITS:

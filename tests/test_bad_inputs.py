@@ -1,0 +1,97 @@
+"""The bad-input corpus (issue 63): every input the CLI reads, malformed, through ``main(argv)``
+in-process. Each case exits 2 with a last stderr line that names its own input, prints no
+traceback, starts no solve and leaves the output folder as it was."""
+import hashlib
+import json
+
+import numpy as np
+import pytest
+
+from invface.cli import main
+
+
+def _folder_hash(folder):
+    h = hashlib.sha1()
+    for p in sorted(folder.rglob("*")):
+        h.update(str(p.relative_to(folder)).encode())
+        if p.is_file():
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def _plate(path, rgba=False):
+    import cv2
+    img = np.zeros((64, 64, 4), np.uint8) if rgba else np.full((64, 64, 3), 128, np.uint8)
+    cv2.imwrite(str(path), img)
+    return path.name
+
+
+def _mesh(path, nan=False):
+    import trimesh
+    m = trimesh.creation.icosphere(subdivisions=2, radius=0.1)
+    v = np.array(m.vertices)
+    if nan:
+        v[3] = np.nan
+    path.write_text("\n".join([f"v {a} {b} {c}" for a, b, c in v] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in m.faces]))
+    return path.name
+
+
+def _curves(path, **data):
+    path.write_text(json.dumps(data))
+    return path.name
+
+
+# name: (files to make {name: maker(path)}, argv (relative names), text the last line must hold)
+CASES = {
+    "calibrate --square 0": ({"board.png": _plate}, ["camera", "calibrate", "board.png", "--board", "9x6",
+                                                      "--square", "0", "-o", "out/cam.json"], "--square"),
+    "fit-scan of a JSON file": ({"scan.json": lambda p: p.write_text("[1, 2]")}, ["fit-scan", "scan.json", "-o", "out"],
+                                "scan.json"),
+    "fit-scan --lam -1": ({"scan.obj": _mesh}, ["fit-scan", "scan.obj", "--lam", "-1", "-o", "out"], "--lam"),
+    "fit-scan --max-iter 0": ({"scan.obj": _mesh}, ["fit-scan", "scan.obj", "--max-iter", "0", "-o", "out"],
+                              "--max-iter"),
+    "fit-scan of a NaN vertex": ({"nan.obj": lambda p: _mesh(p, nan=True)},
+                                 ["fit-scan", "nan.obj", "--unit", "m", "-o", "out"], "nan.obj"),
+    "fit-plate --curve-lambda -1": ({"plate.png": _plate}, ["fit-plate", "plate.png", "--curve-lambda", "-1",
+                                                            "-o", "out"], "--curve-lambda"),
+    "curves with image_size 5": ({"plate.png": _plate, "c.json": lambda p: _curves(
+        p, image_size=5, curves={"lip_outer_upper": [[1, 2], [3, 4]]})},
+        ["fit-plate", "plate.png", "--curves", "c.json", "--no-identity", "-o", "out"], "c.json"),
+    "curves not a list of points": ({"plate.png": _plate, "c.json": lambda p: _curves(
+        p, curves={"lip_outer_upper": "here"})},
+        ["fit-plate", "plate.png", "--curves", "c.json", "--no-identity", "-o", "out"], "c.json"),
+    "curves of an unknown name": ({"plate.png": _plate, "c.json": lambda p: _curves(
+        p, curves={"lips": [[1, 2], [3, 4]]})},
+        ["fit-plate", "plate.png", "--curves", "c.json", "--no-identity", "-o", "out"], "c.json"),
+    "a transparent plate": ({"clear.png": lambda p: _plate(p, rgba=True)}, ["fit-plate", "clear.png", "-o", "out"],
+                            "clear.png"),
+    "a calibration that is not an NPZ": ({"plate.png": _plate, "calib.npz": lambda p: p.write_bytes(b"garbage"),
+                                          "c.json": lambda p: _curves(p, curves={"lip_outer_upper": [[20, 30], [40, 30]]})},
+                                         ["fit-plate", "plate.png", "--calib", "calib.npz", "--curves", "c.json",
+                                          "-o", "out"], "calib.npz"),
+    "a model that is not a bundle": ({"plate.png": _plate, "head.npz": lambda p: p.write_text("{}")},
+                                     ["fit-plate", "plate.png", "--model", "head.npz", "-o", "out"], "head.npz"),
+    "simulate into a file with no mesh suffix": ({}, ["simulate", "--weight", "mouthSmileLeft=1", "-o", "out/result"],
+                                                 "out/result"),
+    "a plate that does not exist": ({}, ["fit-plate", "missing.png", "-o", "out"], "missing.png"),
+    "export of a folder with no fit": ({}, ["export", "out"], "out"),
+    "export in an unknown format": ({"out/blendshape/fit.json": lambda p: p.write_text("{}")},
+                                    ["export", "out", "--format", "fbx"], "fbx"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_bad_input_is_one_clear_line(case, tmp_path, monkeypatch, capsys):
+    files, argv, named = CASES[case]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "out").mkdir()
+    for name, make in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        make(tmp_path / name)
+    before = _folder_hash(tmp_path / "out")
+    code = main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2, (case, err)
+    assert err and named in err[-1], (case, err)
+    assert not any("Traceback" in line for line in err), case
+    assert _folder_hash(tmp_path / "out") == before, case
