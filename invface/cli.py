@@ -616,14 +616,14 @@ def build_parser():
     rp.add_argument("run", help="folder with fit.json (or sub-folders with one each)")
     rp.set_defaults(func=cmd_report)
     ex = sub.add_parser("export", help="write an existing fit run's exports into its folder: the Live Link Face CSV "
-                                       "of ARKit's 52 controls, the take in USD, the rig in UsdSkel")
+                                       "of ARKit's 52 controls, the take in USD, the rig in UsdSkel or glTF")
     ex.add_argument("run", help="a fit-plate output folder")
     ex.add_argument("--format", default="csv", help="comma-separated formats: csv (arkit_<kind>.csv: Live Link Face "
                     "CSV), usd (face_<kind>.usd: the fitted face's points per frame in cm, +Y up, the solved "
                     "camera and the ARKit controls as animated attributes), usdskel (rig_<kind>.usd: the "
-                    "model's blendshape rig in UsdSkel, its shapes by ARKit's names, animated by the fit) "
-                    "(default: %(default)s)")
-    ex.add_argument("--model", help="for usdskel: the model bundle the run was fitted with (default: the run's "
+                    "model's blendshape rig in UsdSkel, its shapes by ARKit's names, animated by the fit), "
+                    "gltf (rig_<kind>.glb: the same rig as glTF 2.0 morph targets and a skin) (default: %(default)s)")
+    ex.add_argument("--model", help="for usdskel and gltf: the model bundle the run was fitted with (default: the run's "
                     "actor.npz, else the built-in head)")
     ex.add_argument("--fps", type=POSITIVE, help="the clip's frame rate for the timecodes (default: the run's, else 24)")
     ex.set_defaults(func=cmd_export)

@@ -107,3 +107,58 @@ def test_the_rig_evaluated_by_usdskel_is_the_fitted_surface(tmp_path, small_expr
         np.testing.assert_allclose(np.array(pts.Get(t)) / 100.0, x, atol=1e-6)
     with pytest.raises(invface.errors.InvfaceError, match="pass the model the run was fitted with"):
         invface.export(run, formats="usdskel", model=invface.template.build(resolution=0.25, expressions=False))
+
+
+def test_the_gltf_rig_read_by_pygltflib_and_skinned_by_the_spec_is_the_fitted_surface(tmp_path, small_expressive_model):
+    """``--format gltf``: rig_<kind>.glb read back with pygltflib (not the writer's code) and
+    evaluated as glTF 2.0 says (morph targets, then joint matrices = global node transform x
+    inverse bind matrix, skin weights) at each frame's keyframe gives the blendshape rig's posed
+    surface; the targets carry the model's names."""
+    pygltflib = pytest.importorskip("pygltflib")
+    from scipy.spatial.transform import Rotation
+    m = small_expressive_model
+    run, _, surfaces = _clip(tmp_path, m)
+    for i in range(3):
+        d = run / f"f{i}" / "blendshape"
+        rec = json.loads((d / "fit.json").read_text())
+        p = m.parameters({"jawOpen": 0.2 * i, "eyeLookOutLeft": 0.1 * i, "jaw": [0.1 * i, 0, 0, 0, 0, 0]})
+        rec.update(weights=dict(zip(m.blendshape_names, p[:-6].tolist())), jaw=p[-6:].tolist())
+        (d / "fit.json").write_text(json.dumps(rec))
+    path = invface.export(run, formats="gltf", model=m)[0]
+    assert path.name == "rig_blendshape.glb"
+    g = pygltflib.GLTF2().load(str(path))
+    blob = g.binary_blob()
+
+    def read(i):
+        acc = g.accessors[i]
+        view = g.bufferViews[acc.bufferView]
+        dtype = {5126: np.float32, 5123: np.uint16, 5125: np.uint32}[acc.componentType]
+        width = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}[acc.type]
+        a = np.frombuffer(blob, dtype, acc.count * width, view.byteOffset + (acc.byteOffset or 0))
+        return a.reshape(acc.count, width) if width > 1 else a
+
+    prim = g.meshes[0].primitives[0]
+    assert g.meshes[0].extras["targetNames"] == list(m.blendshape_names)
+    n, joints, weights = read(prim.attributes.POSITION), read(prim.attributes.JOINTS_0), read(prim.attributes.WEIGHTS_0)
+    deltas = np.array([read(t["POSITION"]) for t in prim.targets])
+    assert np.array_equal(read(prim.indices).reshape(-1, 3), m.triangles)
+    anim = g.animations[0]
+    times = read(anim.samplers[0].input)
+    assert times.tolist() == pytest.approx([10 / 25, 12 / 25])          # the flagged frame is left out
+    track = {(c.target.node, c.target.path): read(anim.samplers[c.sampler].output) for c in anim.channels}
+    inverse_bind = read(g.skins[0].inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1)
+
+    def trs(t, q):
+        M = np.eye(4)
+        M[:3, :3], M[:3, 3] = Rotation.from_quat(q).as_matrix(), t
+        return M
+
+    for k, x in ((0, surfaces[0]), (1, surfaces[2])):
+        w = track[(2, "weights")].reshape(len(times), -1)[k]
+        pre = n + np.tensordot(w, deltas, 1)
+        root = trs(track[(0, "translation")][k], track[(0, "rotation")][k])
+        jaw = root @ trs(track[(1, "translation")][k], track[(1, "rotation")][k])
+        mats = np.array([root, jaw]) @ inverse_bind
+        M = np.einsum("vj,vjab->vab", weights, mats[joints])
+        skinned = np.einsum("vab,vb->va", M[:, :3, :3], pre) + M[:, :3, 3]
+        np.testing.assert_allclose(skinned, x, atol=2e-6)

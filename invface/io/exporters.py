@@ -11,6 +11,7 @@ has. ``export(path, data)`` picks the writer by the path's suffix; a new format 
 | .csv                        | (header, rows)                | tables.write_csv     |
 | .html .txt .xml .md         | str                           | atomic.write_text    |
 | .usd .usda .usdc            | a take: {"frames", "triangles", "camera", "fps"} | usd.write_usd |
+| .glb                        | a rig and its take (as ``usd.write_usd_rig``'s) | gltf.write_glb |
 
 Named formats (``export(path, data, format=NAME)``), for files whose suffix says too little:
 
@@ -109,6 +110,14 @@ def _usd(path, data, **_):
 
 
 register((".usd", ".usda", ".usdc"), _usd)
+
+
+def _glb(path, data, **_):
+    from .gltf import write_glb
+    write_glb(path, data)
+
+
+register(".glb", _glb)
 
 
 def _livelink(path, data, **_):

@@ -209,9 +209,10 @@ def rig_frames(run, kind, single, model):
     return out
 
 
-def write_usd_rigs(out, kinds, model, fps=24.0, single=False):
-    """out/rig_<kind>.usd per kind: the model's blendshape rig in UsdSkel animated by the kind's
-    fitted controls (``io.usd.write_usd_rig``). Returns the paths."""
+def write_rigs(out, kinds, model, fps=24.0, single=False, suffix=".usd"):
+    """out/rig_<kind><suffix> per kind: the model's blendshape rig animated by the kind's fitted
+    controls, in UsdSkel (".usd": ``io.usd.write_usd_rig``) or glTF (".glb": ``io.gltf.write_glb``).
+    Returns the paths."""
     from ..io.exporters import export
     paths = []
     for kind in kinds:
@@ -222,7 +223,8 @@ def write_usd_rigs(out, kinds, model, fps=24.0, single=False):
         data = {"fps": fps or 24.0, "camera": cam, "neutral": model.neutral, "triangles": model.triangles,
                 "names": list(model.blendshape_names), "deltas": model.blendshapes,
                 "jaw_weights": model.jaw_weights, "frames": frames}
-        paths.append(export(Path(out) / f"rig_{kind}.usd", data, format="usdskel"))
+        path = Path(out) / f"rig_{kind}{suffix}"
+        paths.append(export(path, data, format="usdskel") if suffix == ".usd" else export(path, data))
     return paths
 
 
@@ -237,15 +239,15 @@ def write_sequence_outputs(out, kinds, fps=0.0):
     return paths
 
 
-EXPORT_FORMATS = ("csv", "usd", "usdskel")
+EXPORT_FORMATS = ("csv", "usd", "usdskel", "gltf")
 
 
 def export(run_dir, formats=("csv",), fps=None, model=None):
     """Write an existing fit run's exports into its folder: "csv" is the Live Link Face CSV per
     kind (``write_arkit_csv``: arkit_<kind>.csv), "usd" the take as a USD stage per kind
     (``write_usd_takes``: face_<kind>.usd: the fitted face's points per frame, the solved camera,
-    the ARKit controls), "usdskel" the model's rig animated by the fit (``write_usd_rigs``:
-    rig_<kind>.usd; model: the model the run was fitted with, see ``run_model``). run_dir: a fit-plate output folder (a photo's,
+    the ARKit controls), "usdskel" and "gltf" the model's rig animated by the fit (``write_rigs``:
+    rig_<kind>.usd, rig_<kind>.glb; model: the model the run was fitted with, see ``run_model``). run_dir: a fit-plate output folder (a photo's,
     with <kind>/fit.json, or a sequence's, with <frame>/<kind>/fit.json); fps: the clip's frame
     rate (default run.json's, else 24). Returns the paths written; InvfaceError naming the folder
     when it holds no fit, or an unknown format."""
@@ -266,8 +268,10 @@ def export(run_dir, formats=("csv",), fps=None, model=None):
     rate = fps or record.get("fps") or 24.0
     paths = write_arkit_csv(run, kinds, rate, single=bool(single)) if "csv" in formats else []
     paths += write_usd_takes(run, kinds, rate, single=bool(single)) if "usd" in formats else []
-    if "usdskel" in formats:
-        paths += write_usd_rigs(run, kinds, run_model(run, model), rate, single=bool(single))
+    rigs = [(f, suffix) for f, suffix in (("usdskel", ".usd"), ("gltf", ".glb")) if f in formats]
+    model = run_model(run, model) if rigs else None
+    for _, suffix in rigs:
+        paths += write_rigs(run, kinds, model, rate, single=bool(single), suffix=suffix)
     return paths
 
 
