@@ -13,6 +13,14 @@ from invface.model.arkit import ARKIT_NAMES  # noqa: E402
 from invface.render.camera import Camera  # noqa: E402
 
 
+def _validation_errors(stage):
+    """The messages of USD's own validators (UsdValidation: the core, UsdGeom, UsdSkel ... ones
+    registered in this build) on a stage."""
+    from pxr import UsdValidation
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    return [e.GetMessage() for e in UsdValidation.ValidationContext(validators).Validate(stage)]
+
+
 def _camera():
     cam = Camera.front_view(640, 480)
     cam.K[0, 2] += 21.0                         # principal point off centre
@@ -51,6 +59,7 @@ def test_a_take_reads_back_in_usd_and_its_camera_projects_as_ours(tmp_path, smal
     assert [p.name for p in paths] == ["face_blendshape.usd"]
     stage = Usd.Stage.Open(str(paths[0]))
     assert UsdGeom.GetStageUpAxis(stage) == "Y" and UsdGeom.GetStageMetersPerUnit(stage) == pytest.approx(0.01)
+    assert _validation_errors(stage) == []
     assert stage.GetTimeCodesPerSecond() == 25.0 and (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (10, 12)
     mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Capture/Face"))
     pts = mesh.GetPointsAttr()
@@ -99,6 +108,7 @@ def test_the_rig_evaluated_by_usdskel_is_the_fitted_surface(tmp_path, small_expr
     path = invface.export(run, formats="usdskel", model=m)[0]
     assert path.name == "rig_blendshape.usd"
     stage = Usd.Stage.Open(str(path))
+    assert _validation_errors(stage) == []
     binding = UsdSkel.BindingAPI(stage.GetPrimAtPath("/Capture/Rig/Face"))
     assert list(binding.GetBlendShapesAttr().Get()) == list(m.blendshape_names)
     assert UsdSkel.BakeSkinning(UsdSkel.Root(stage.GetPrimAtPath("/Capture/Rig")), Gf.Interval(10, 12))
