@@ -1,5 +1,5 @@
-"""Triangle meshes in and out: OBJ/PLY/STL/OFF through trimesh, and the binary PLY with vertex
-colours that Mitsuba reads. Errors name the file."""
+"""Triangle meshes in and out: OBJ/PLY/STL/OFF through trimesh (PLY triangle strips through
+``plystrips``), and the binary PLY with vertex colours that Mitsuba reads. Errors name the file."""
 from __future__ import annotations
 
 import warnings
@@ -31,8 +31,15 @@ def read_mesh(path):
         raise MeshError(f"{path}: not a readable mesh ({e})") from None
     V = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), float)
     F = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), np.int64)
+    points = len(V)
+    if len(F) == 0 and path.suffix.lower() == ".ply":      # faces as triangle strips (scan archives)
+        from .plystrips import read_tristrips, vertex_count
+        V, F = read_tristrips(path) or (V, F)
+        points = max(len(V), vertex_count(path))
     if len(V) == 0 or len(F) == 0:
-        raise MeshError(f"{path}: the file holds no triangle mesh")
+        raise MeshError(f"{path}: the file holds no triangle mesh"
+                        + (f" ({points} points and no faces: a point cloud; mesh it first, e.g. Poisson "
+                           "surface reconstruction in MeshLab or Open3D)" if points else ""))
     return V, F
 
 
