@@ -62,7 +62,7 @@ def write_glb(path, data):
     """Write the rig and its take to ``path`` (.glb) atomically. data: as
     ``usd.write_usd_rig``'s ({"fps", "neutral" (V, 3) m, "triangles" (F, 3), "names" (K,),
     "deltas" (K, V, 3) m, "jaw_weights" (V,), "frames": [{"frame", "weights" (K,),
-    "jaw_matrix" (4, 4), "rotation" (3,) rad, "translation" (3,) m}]}; "camera" is not written).
+    "jaw_matrix" (4, 4), "head_matrix" (4, 4)}]}; "camera" is not written).
     Returns the Path."""
     frames = list(data["frames"])
     if not frames:
@@ -98,10 +98,9 @@ def write_glb(path, data):
 
 def _animation(buf, frames, fps):
     """The "fit" animation: morph weights and the root's and jaw's translation and rotation."""
-    from ..model.rig import euler_xyz
     times = buf.add(np.array([float(f["frame"]) / fps for f in frames], np.float32), "SCALAR", FLOAT, bounds=True)
     weights = np.array([np.asarray(f["weights"], np.float32) for f in frames])
-    heads = [(np.asarray(f["translation"], float), euler_xyz(np.asarray(f["rotation"], float))) for f in frames]
+    heads = [(np.asarray(f["head_matrix"], float)[:3, 3], np.asarray(f["head_matrix"], float)[:3, :3]) for f in frames]
     jaws = [(np.asarray(f["jaw_matrix"], float)[:3, 3], np.asarray(f["jaw_matrix"], float)[:3, :3]) for f in frames]
     samplers, channels = [], []
 

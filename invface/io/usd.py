@@ -141,8 +141,8 @@ def write_usd_rig(path, data):
     blendshape rig of paper 000 Eq. 1-2: x = H T(j)(n + B b), linear blend skinning between the
     head and the jaw. data: {"fps", "camera" (as ``write_usd``), "neutral" (V, 3) m, "triangles"
     (F, 3), "names" (K,), "deltas" (K, V, 3) m, "jaw_weights" (V,), "frames": [{"frame",
-    "weights" (K,), "jaw_matrix" (4, 4), "rotation" (3,) rad Euler XYZ, "translation" (3,) m}]}.
-    Returns the Path."""
+    "weights" (K,), "jaw_matrix" (4, 4), "head_matrix" (4, 4): the head's pose R(theta) x + t,
+    translations in m}]}. Returns the Path."""
     Gf, Sdf, Usd, UsdGeom, Vt = _pxr()
     from pxr import UsdSkel
     from pathlib import Path
@@ -206,16 +206,13 @@ def _rig_mesh(stage, data, Gf, UsdGeom, Vt, UsdSkel):
 def _rig_animation(stage, frames, names, joints, Gf, Vt, UsdSkel):
     """The SkelAnimation: per frame the head's pose (root) and the jaw's transform relative to
     it (translations in cm), and the blendshape weights."""
-    from ..model.rig import euler_xyz
     anim = UsdSkel.Animation.Define(stage, "/Capture/Rig/Skeleton/Animation")
     anim.CreateJointsAttr(joints)
     anim.CreateBlendShapesAttr(Vt.TokenArray(list(names)))
     weights = anim.CreateBlendShapeWeightsAttr()
     for f in frames:
         t = float(f["frame"])
-        H = np.eye(4)
-        H[:3, :3], H[:3, 3] = euler_xyz(np.asarray(f["rotation"], float)), np.asarray(f["translation"], float)
-        M = np.array(f["jaw_matrix"], float)
+        H, M = np.array(f["head_matrix"], float), np.array(f["jaw_matrix"], float)
         H[:3, 3] *= UNITS_PER_M
         M[:3, 3] *= UNITS_PER_M
         anim.SetTransforms(Vt.Matrix4dArray([_matrix(Gf, H), _matrix(Gf, M)]), t)

@@ -193,6 +193,7 @@ def rig_frames(run, kind, single, model):
     model (their surfaces have another vertex count)."""
     from ..errors import InvfaceError
     from ..model.controls import FitVector
+    from ..model.rig import euler_xyz
     take = take_frames(run, kind, single)
     if take is None:
         return None
@@ -204,8 +205,10 @@ def rig_frames(run, kind, single, model):
     out = []
     for f in frames:
         p = vec.unpack(vec.from_dict(f["record"], what=f"{run} {kind} frame {f['frame']}"))[0]
+        H = np.eye(4)
+        H[:3, :3], H[:3, 3] = euler_xyz(np.asarray(f["rotation"], float)), np.asarray(f["translation"], float)
         out.append({"frame": f["frame"], "weights": p[vec.weights], "jaw_matrix": model.jaw_matrix(p[vec.jaw]),
-                    "rotation": f["rotation"], "translation": f["translation"]})
+                    "head_matrix": H})
     return out
 
 
