@@ -30,8 +30,12 @@ def test_fit_vector_packs_names_bounds_and_dicts(small_expressive_model):
     assert np.all(lo[vec.weights] == 0) and np.all(hi[vec.weights] == 1)
     assert hi[vec.jaw][0] == pytest.approx(0.6) and np.all(np.isinf(lo[vec.pose]))
     d = vec.to_dict(z)
-    assert set(d) == {"weights", "jaw", "rotation", "translation", "arkit", "arkit_unsupported"}
+    assert set(d) == {"weights", "jaw", "rotation", "translation", "arkit", "arkit_unsupported", "eyes"}
     assert len(d["weights"]) == K and len(d["arkit"]) == 52
+    from invface.model.gaze import eye_angles                                    # each eye's yaw, pitch (rad)
+    assert d["eyes"] == {s: {"yaw": pytest.approx(a[0], abs=1e-6), "pitch": pytest.approx(a[1], abs=1e-6)}
+                         for s, a in eye_angles(m.blendshape_names, p[:K]).items()}
+    assert abs(d["eyes"]["L"]["yaw"]) > 0.01                                      # the eyeLook weights turn them
     np.testing.assert_allclose(vec.from_dict(d), z, atol=1e-6)                 # to_dict rounds to 1e-6
     c = vec.to_controls(z)
     np.testing.assert_allclose(vec.from_controls(c), z, atol=1e-12)
