@@ -29,6 +29,20 @@ def _camera():
     return cam
 
 
+def _controls(model, i):
+    return model.parameters({"jawOpen": 0.2 * i, "eyeLookOutLeft": 0.1 * i, "jaw": [0.1 * i, 0, 0, 0, 0, 0]})
+
+
+def _with_controls(run, model):
+    """Each frame's fit.json given the weights and jaw its surface was made with, as a fit writes them."""
+    for i in range(3):
+        d = run / f"f{i}" / "blendshape"
+        rec = json.loads((d / "fit.json").read_text())
+        p = _controls(model, i)
+        rec.update(weights=dict(zip(model.blendshape_names, p[:-6].tolist())), jaw=p[-6:].tolist())
+        (d / "fit.json").write_text(json.dumps(rec))
+
+
 def _clip(tmp_path, model):
     """A sequence folder of three frames (the middle one flagged) with fit.json and fit.npz."""
     cam, run = _camera(), tmp_path / "clip"
@@ -36,7 +50,7 @@ def _clip(tmp_path, model):
     (run / "run.json").write_text(json.dumps({"frames": ["f0", "f1", "f2"], "fps": 25.0}))
     surfaces = []
     for i in range(3):
-        p = model.parameters({"jawOpen": 0.2 * i, "eyeLookOutLeft": 0.1 * i, "jaw": [0.1 * i, 0, 0, 0, 0, 0]})
+        p = _controls(model, i)
         rot, tr = np.array([0.02 * i, -0.1, 0.0]), np.array([0.001 * i, 0.0, 0.0])
         xr = model.surface_model("blendshape").surface(p) @ invface.model.rig.euler_xyz(rot).T + tr
         surfaces.append(xr)
@@ -99,12 +113,7 @@ def test_the_rig_evaluated_by_usdskel_is_the_fitted_surface(tmp_path, small_expr
     from pxr import Gf, Usd, UsdGeom, UsdSkel
     m = small_expressive_model
     run, _, surfaces = _clip(tmp_path, m)
-    for i in range(3):       # the fits' weights and jaw, as fit.json writes them
-        d = run / f"f{i}" / "blendshape"
-        rec = json.loads((d / "fit.json").read_text())
-        p = m.parameters({"jawOpen": 0.2 * i, "eyeLookOutLeft": 0.1 * i, "jaw": [0.1 * i, 0, 0, 0, 0, 0]})
-        rec.update(weights=dict(zip(m.blendshape_names, p[:-6].tolist())), jaw=p[-6:].tolist())
-        (d / "fit.json").write_text(json.dumps(rec))
+    _with_controls(run, m)
     path = invface.export(run, formats="usdskel", model=m)[0]
     assert path.name == "rig_blendshape.usd"
     stage = Usd.Stage.Open(str(path))
@@ -128,12 +137,7 @@ def test_the_gltf_rig_read_by_pygltflib_and_skinned_by_the_spec_is_the_fitted_su
     from scipy.spatial.transform import Rotation
     m = small_expressive_model
     run, _, surfaces = _clip(tmp_path, m)
-    for i in range(3):
-        d = run / f"f{i}" / "blendshape"
-        rec = json.loads((d / "fit.json").read_text())
-        p = m.parameters({"jawOpen": 0.2 * i, "eyeLookOutLeft": 0.1 * i, "jaw": [0.1 * i, 0, 0, 0, 0, 0]})
-        rec.update(weights=dict(zip(m.blendshape_names, p[:-6].tolist())), jaw=p[-6:].tolist())
-        (d / "fit.json").write_text(json.dumps(rec))
+    _with_controls(run, m)
     path = invface.export(run, formats="gltf", model=m)[0]
     assert path.name == "rig_blendshape.glb"
     g = pygltflib.GLTF2().load(str(path))

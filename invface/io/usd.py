@@ -23,6 +23,8 @@ turn about x.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ..errors import ConfigError
@@ -81,20 +83,25 @@ def write_usd(path, data):
         raise ConfigError(f"{path}: no frames to write")
     tri = np.asarray(data["triangles"], np.int32)
     with atomic_path(path) as tmp:
-        stage = Usd.Stage.CreateNew(str(tmp))
-        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
-        UsdGeom.SetStageMetersPerUnit(stage, 1.0 / UNITS_PER_M)
-        stage.SetTimeCodesPerSecond(float(data.get("fps") or 24.0))
-        stage.SetFramesPerSecond(float(data.get("fps") or 24.0))
-        stage.SetStartTimeCode(float(frames[0]["frame"]))
-        stage.SetEndTimeCode(float(frames[-1]["frame"]))
-        root = UsdGeom.Xform.Define(stage, "/Capture")
-        stage.SetDefaultPrim(root.GetPrim())
+        stage = _stage(tmp, frames, data.get("fps"), Usd, UsdGeom)
         _face(stage, frames, tri, Gf, Sdf, UsdGeom, Vt)
         _camera(stage, data["camera"], Gf, UsdGeom)
         stage.GetRootLayer().Save()
-    from pathlib import Path
     return Path(path)
+
+
+def _stage(path, frames, fps, Usd, UsdGeom):
+    """A new stage at ``path``: +Y up, in cm, timed by the frames' numbers at ``fps`` (default
+    24), with the default prim /Capture."""
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0 / UNITS_PER_M)
+    stage.SetTimeCodesPerSecond(float(fps or 24.0))
+    stage.SetFramesPerSecond(float(fps or 24.0))
+    stage.SetStartTimeCode(float(frames[0]["frame"]))
+    stage.SetEndTimeCode(float(frames[-1]["frame"]))
+    stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/Capture").GetPrim())
+    return stage
 
 
 def _face(stage, frames, tri, Gf, Sdf, UsdGeom, Vt):
@@ -145,20 +152,11 @@ def write_usd_rig(path, data):
     translations in m}]}. Returns the Path."""
     Gf, Sdf, Usd, UsdGeom, Vt = _pxr()
     from pxr import UsdSkel
-    from pathlib import Path
     frames = list(data["frames"])
     if not frames:
         raise ConfigError(f"{path}: no frames to write")
     with atomic_path(path) as tmp:
-        stage = Usd.Stage.CreateNew(str(tmp))
-        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
-        UsdGeom.SetStageMetersPerUnit(stage, 1.0 / UNITS_PER_M)
-        fps = float(data.get("fps") or 24.0)
-        stage.SetTimeCodesPerSecond(fps)
-        stage.SetFramesPerSecond(fps)
-        stage.SetStartTimeCode(float(frames[0]["frame"]))
-        stage.SetEndTimeCode(float(frames[-1]["frame"]))
-        stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/Capture").GetPrim())
+        stage = _stage(tmp, frames, data.get("fps"), Usd, UsdGeom)
         UsdSkel.Root.Define(stage, "/Capture/Rig")
         skel = UsdSkel.Skeleton.Define(stage, "/Capture/Rig/Skeleton")
         joints = Vt.TokenArray(["root", "root/jaw"])
