@@ -510,7 +510,7 @@ def build_parser():
                    help="the scan's unit (default: found from the face's size; a scan whose face fits no unit is "
                         "scaled to an adult face)")
     b.add_argument("--expressions", choices=["copy", "simulate", "none"], default="copy",
-                   help="without --blendshapes: carry the template's 51 ARKit shapes onto the actor (copy), "
+                   help="without --blendshapes: carry the template's 52 ARKit shapes onto the actor (copy), "
                         "simulate the template's older FACS-style action units on the new anatomy, or none. "
                         "With --blendshapes named in ARKit's or ICT-FaceKit's style, the controls the folder "
                         "lacks are filled from the template")

@@ -1,0 +1,45 @@
+"""The documents a user reads: the CLI reference is the parser's own, and every link and picture
+in README.md, ARCHITECTURE.md and docs/ resolves inside the clone."""
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = [ROOT / "README.md", ROOT / "ARCHITECTURE.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def flag_is_help(action):
+    import argparse
+    return isinstance(action, argparse._HelpAction)
+
+
+def test_the_cli_reference_is_current():
+    """docs/cli.md is what scripts/cli_docs.py writes from the parser: every verb and option,
+    with its help text and default, and no option the CLI does not have."""
+    r = subprocess.run([sys.executable, str(ROOT / "scripts" / "cli_docs.py"), "--check"], capture_output=True,
+                       text=True)
+    assert r.returncode == 0, r.stderr
+    text = (ROOT / "docs" / "cli.md").read_text()
+    sys.path.insert(0, str(ROOT / "scripts"))
+    from cli_docs import verbs
+    from invface.cli import build_parser
+    for words, sub, _ in verbs(build_parser()):
+        section = text.split(f"## `invface {' '.join(words)}`")[1].split("\n## ")[0]
+        for action in sub._actions:
+            for flag in ([] if flag_is_help(action) else action.option_strings):
+                assert f"`{flag}`" in section, (words, flag)
+    documented = set(re.findall(r"`(--[a-z][a-z-]*)`", text))
+    parsers = [build_parser()] + [sub for _, sub, _ in verbs(build_parser())]
+    known = {f for sub in parsers for a in sub._actions for f in a.option_strings}
+    assert documented <= known, documented - known
+
+
+def test_links_and_pictures_stay_inside_the_clone():
+    for doc in DOCS:
+        text = doc.read_text()
+        assert "../shared" not in text, doc.name
+        for target in re.findall(r"\]\(([^)#\s]+)", text):
+            if re.match(r"[a-z]+://", target):
+                continue
+            assert (doc.parent / target).exists(), (doc.name, target)
