@@ -473,7 +473,7 @@ def _number(cast, low=None, strict=False):
     return check
 
 
-class _DefaultsHelp(argparse.HelpFormatter):
+class _DefaultsHelp(argparse.RawDescriptionHelpFormatter):
     """Help that states each option's default: appended as "(default: X)" where the option has a
     value for it and its text does not describe the default already."""
 
@@ -554,7 +554,8 @@ def build_parser():
     fs.add_argument("--unit", choices=["m", "cm", "mm"], help="the scan's unit (default: found from its size)")
     fs.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
     fs.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model")
-    fs.add_argument("--model-kind", choices=["blendshape", "simulation"], default="blendshape")
+    fs.add_argument("--model-kind", choices=["blendshape", "simulation"], default="blendshape",
+                    help="blendshape: the rig alone (paper 000 Eq. 1-2, fast); simulation: the muscle-driven flesh")
     fs.add_argument("--mode", choices=["correspondence", "nearest"], default="correspondence",
                     help="correspondence: same topology as the model; nearest: any mesh, point-to-plane")
     fs.add_argument("--lam", type=NON_NEGATIVE, default=EQ13_LAMBDA, help="weight regulariser lambda of Eq. 13 (paper: 1e-6)")
@@ -596,7 +597,9 @@ def build_parser():
     fp.add_argument("--camera", help="JSON camera file (default: PLATE.json beside the plate, else the front view)")
     fp.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
     fp.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model")
-    fp.add_argument("--model-kind", choices=["blendshape", "simulation", "both"], default="blendshape")
+    fp.add_argument("--model-kind", choices=["blendshape", "simulation", "both"], default="blendshape",
+                    help="blendshape: the rig alone (paper 000 Eq. 1-2, fast); simulation: the muscle-driven flesh "
+                    "(lips keep their volume, contacts hold); both: each, compared in the report")
     fp.add_argument("--curve-lambda", type=NON_NEGATIVE, help=CURVE_LAMBDA_HELP)
     fp.add_argument("--iterations", type=NON_NEGATIVE_INT, default=25, help="shape-from-shading iterations at most")
     fp.add_argument("--solver", choices=["dogleg", "lbfgs"], default="dogleg",
@@ -625,7 +628,8 @@ def build_parser():
                     "gltf (rig_<kind>.glb: the same rig as glTF 2.0 morph targets and a skin) (default: %(default)s)")
     ex.add_argument("--model", help="for usdskel and gltf: the model bundle the run was fitted with (default: the run's "
                     "actor.npz, else the built-in head)")
-    ex.add_argument("--fps", type=POSITIVE, help="the clip's frame rate for the timecodes (default: the run's, else 24)")
+    ex.add_argument("--fps", type=POSITIVE, help="the clip's frame rate (frames per second) for the timecodes "
+                    "(default: the run's, else 24)")
     ex.set_defaults(func=cmd_export)
     cam = sub.add_parser("camera", help="camera tools")
     camsub = cam.add_subparsers(dest="camera_command", required=True, parser_class=verb)
@@ -639,7 +643,28 @@ def build_parser():
     d = sub.add_parser("demo", help="run the main job on the built-in model")
     d.add_argument("-o", "--out", "--output", dest="output", default="reports/demo", help="output folder")
     d.set_defaults(func=cmd_demo)
+    for words, example in EXAMPLES.items():
+        parser = sub.choices[words[0]]
+        for w in words[1:]:
+            parser = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[w]
+        parser.epilog = "example:\n" + "\n".join("  " + line for line in example)
     return p
+
+
+# one worked example per verb, shown under its --help and in docs/cli.md
+EXAMPLES = {
+    ("build-model",): ["invface build-model --neutral scan.obj -o actor.npz --preview actor",
+                       "invface build-model actor.npz --preview actor     # summarise an existing bundle"],
+    ("simulate",): ["invface simulate --weight mouthSmileLeft=0.8 --weight jawOpen=0.3 -o smile.obj --preview smile.png"],
+    ("calibrate",): ["invface calibrate plates/neutral.png -o calib.npz"],
+    ("fit-scan",): ["invface fit-scan expression.obj --model actor.npz --mode nearest --model-kind simulation -o fit"],
+    ("fit-plate",): ["invface fit-plate photo.jpg --model-kind both -o fit",
+                     "invface fit-plate clip.mp4 --frames 0:240 --model-kind both --workers 2 -o take"],
+    ("report",): ["invface report fit"],
+    ("export",): ["invface export take --format csv,usd,usdskel,gltf"],
+    ("camera", "calibrate"): ["invface camera calibrate board/*.jpg --board 9x6 --square 0.025 -o camera.json"],
+    ("demo",): ["invface demo -o reports/demo"],
+}
 
 
 def _os_error(e):

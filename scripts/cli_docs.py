@@ -64,6 +64,8 @@ def render():
         lines += [f"## `invface {verb}`", "", cell(helptext) or cell(sub.description or ""), "",
                   "```", usage.replace("usage: ", ""), "```", "",
                   "| option | meaning | default |", "|---|---|---|", *option_rows(sub), ""]
+        if sub.epilog:
+            lines += ["```sh", *[line.strip() for line in sub.epilog.splitlines()[1:]], "```", ""]
     return "\n".join(lines)
 
 

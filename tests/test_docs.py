@@ -43,3 +43,18 @@ def test_links_and_pictures_stay_inside_the_clone():
             if re.match(r"[a-z]+://", target):
                 continue
             assert (doc.parent / target).exists(), (doc.name, target)
+
+
+def test_every_verbs_example_parses():
+    """The example under each verb's --help (and in docs/cli.md) is a command the parser takes;
+    so are the README's recipes."""
+    import shlex
+    from invface.cli import EXAMPLES, build_parser
+    readme = (ROOT / "README.md").read_text()
+    recipes = [line for block in re.findall(r"```sh\n(.*?)```", readme, re.S) for line in block.splitlines()
+               if line.startswith("invface ")]
+    assert len(recipes) >= 5
+    for line in [e for lines in EXAMPLES.values() for e in lines] + recipes:
+        argv = shlex.split(line.split("#")[0])[1:]
+        args = build_parser().parse_args(argv)
+        assert callable(args.func), line
