@@ -77,8 +77,10 @@ def test_layers_import_downwards_only():
     users = [str(f.relative_to(ROOT)) for folder in ("bench", "tests", "invface") for f in (ROOT / folder).rglob("*.py")
              if re.search(r"^\s*(from invface\.cli import|import invface\.cli|from invface import cli|from \.+cli import)",
                            f.read_text(), re.M)]
-    # the tests of the CLI itself: its verbs, its error path, its refusal of an unsafe --scheduler
-    assert sorted(users) == ["tests/test_cli.py", "tests/test_cluster_security.py", "tests/test_error_path.py"], users
+    # the tests of the CLI itself: its verbs, its error path, its bad-input corpus, its reference
+    # and examples, its refusal of an unsafe --scheduler
+    assert sorted(users) == ["tests/test_bad_inputs.py", "tests/test_cli.py", "tests/test_cluster_security.py",
+                             "tests/test_docs.py", "tests/test_error_path.py"], users
 
 
 def _sim_scene(m):
