@@ -184,6 +184,10 @@ def test_fit_plate_on_a_folder_fits_the_frames_and_writes_the_sequence_page(smal
     assert all(s["truth"]["shape_median_mm"] < 0.5 for s in fits.values()), [s["truth"] for s in fits.values()]
     page = (out / "index.html").read_text()
     assert "weights_blendshape.png" in page and (out / "weights_blendshape.png").is_file()
+    import re                                                # every picture says what it shows
+    for p in [out / "index.html", *out.glob("*/index.html")]:
+        tags = re.findall(r"<img[^>]*>", p.read_text())
+        assert tags and all(re.search(r'alt="[^"]+"', t) for t in tags), p
     assert 'href="smile_blendshape/index.html"' in page and (out / "smile_blendshape" / "index.html").is_file()
     (out / "index.html").unlink()
     r = run("report", str(out))                       # the report verb rewrites the sequence page

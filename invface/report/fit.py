@@ -256,8 +256,8 @@ def write_report(run, title=None, quick=False):
                                f"({type(e).__name__}: {e}); fit again") from None
         rel = os.path.relpath(f, run)
         rows.append(summary)
-        figs = "".join(f'<figure><img src="{html.escape(os.path.join(rel, p))}"><figcaption>{html.escape(c)}'
-                       "</figcaption></figure>" for c, p in pics.items())
+        figs = "".join(f'<figure><img src="{html.escape(os.path.join(rel, p))}" alt="{html.escape(c)}">'
+                       f"<figcaption>{html.escape(c)}</figcaption></figure>" for c, p in pics.items())
         notes = "".join(f"<p class=note>{html.escape(n)}</p>" for n in summary.get("notes", []))
         heat = summary.get("mesh_heat", {})
         status = f"status: {html.escape(str(summary.get('status', '')))}; " + (

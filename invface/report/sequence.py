@@ -83,8 +83,8 @@ def write_sequence_report(run, title=None):
         if acts:
             figs["muscle activations over the frames"] = _curves_over_frames(
                 run / f"activations_{kind}.png", have, acts, f"{kind} model: muscle activations", "activation")
-        pics = "".join(f'<figure><img src="{html.escape(p)}"><figcaption>{html.escape(c)}</figcaption></figure>'
-                       for c, p in figs.items())
+        pics = "".join(f'<figure><img src="{html.escape(p)}" alt="{html.escape(c)}"><figcaption>{html.escape(c)}'
+                       "</figcaption></figure>" for c, p in figs.items())
         head = "<th>frame</th>" + "".join(f"<th>{html.escape(n)}</th>" for n, _ in COMPARE[1:]) + "<th>flagged</th>"
         rows = "".join(
             f'<tr><td><a href="{html.escape(f)}/index.html">{html.escape(f)}</a></td>'
@@ -97,7 +97,8 @@ def write_sequence_report(run, title=None):
                      + html.escape(", ".join(flagged[:10])) + (" ..." if len(flagged) > 10 else "")
                      + ". The curves file gives them controls interpolated from their neighbours.</p>")
         strip = "".join(
-            f'<figure><a href="{html.escape(f)}/index.html"><img class=thumb src="{html.escape(f"{f}/{kind}/wipe.png")}">'
+            f'<figure><a href="{html.escape(f)}/index.html"><img class=thumb src="{html.escape(f"{f}/{kind}/wipe.png")}" '
+            f'alt="{html.escape(f)}: plate | render | wipe">'
             f"</a><figcaption>{html.escape(f)}</figcaption></figure>"
             for f in have if (run / f / kind / "wipe.png").is_file())
         sections.append(f"<h2>{html.escape(kind)} model</h2><div class=grid>{pics}</div>"
