@@ -411,3 +411,21 @@ def test_shading_dogleg_log_stays_aligned_when_a_trial_fails(small_expressive_mo
     assert all("rho" in h for h in fit.history[1:])
     costs = [h["cost"] for h in fit.history[2:] if h["accepted"]]
     assert costs and min(costs) < fit.history[0]["cost"]
+
+
+def test_the_kinds_heat_maps_share_one_scale(tmp_path):
+    """A page that shows two kinds draws their 3D error heat maps on one scale (the larger one's),
+    so their colours compare; each kind alone would have had its own."""
+    import re
+    import trimesh
+    from invface.report.fit import write_report
+    s = trimesh.creation.icosphere(subdivisions=2, radius=0.05)
+    for kind, err_mm in (("blendshape", 0.8), ("simulation", 0.2)):
+        d = tmp_path / kind
+        d.mkdir()
+        d.joinpath("fit.json").write_text(json.dumps({"kind": kind, "weights": {"mouthSmileLeft": 0.5}}))
+        e = np.linspace(0, err_mm, len(s.vertices)) / 1000
+        np.savez(d / "fit.npz", surface=s.vertices, neutral=s.vertices, triangles=s.faces, vertex_error=e)
+    page = write_report(tmp_path).read_text()
+    scales = re.findall(r"scale 0-([0-9.]+) mm", page)
+    assert len(scales) == 2 and scales[0] == scales[1] and float(scales[0]) == pytest.approx(0.8 * 0.99, abs=0.01)

@@ -134,15 +134,41 @@ def _mouth_closeup(path, plate_srgb, render_srgb, data, width=400):
     return _png(path, np.concatenate([panels[0], gap, panels[1]], 1) / 255.0)
 
 
-def _mesh_heat(path, data, summary):
+def _mesh_values(data):
+    """(per-vertex mm (V,), label) of the 3D heat map: the vertex error against a truth, else
+    the motion from the neutral."""
+    x = data["surface"]
+    if "vertex_error" in data:
+        return data["vertex_error"] * 1000, "vertex error"
+    return np.linalg.norm(x - x.mean(0) - (data["neutral"] - data["neutral"].mean(0)), axis=1) * 1000, \
+        "motion from the neutral"
+
+
+def _mesh_scale(e):
+    """The heat map's top (mm): the values' 99th percentile, at least 0.5 mm."""
+    return max(float(np.percentile(e[np.isfinite(e)], 99)), 0.5)
+
+
+def _shared_mesh_scale(folders):
+    """One 3D heat-map scale (mm) for the fits of a page (the kinds side by side), or None."""
+    scales = []
+    for f in folders:
+        try:
+            with np.load(Path(f) / "fit.npz", allow_pickle=False) as z:
+                scales.append(_mesh_scale(_mesh_values({k: z[k] for k in ("surface", "neutral", "vertex_error")
+                                                        if k in z.files})[0]))
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError):
+            continue                      # write_report names the unreadable folder itself
+    return max(scales) if scales else None
+
+
+def _mesh_heat(path, data, summary, vmax=None):
+    """The 3D heat map (``_mesh_values``) rendered front on, black 0 to white ``vmax`` mm
+    (default: its own ``_mesh_scale``)."""
     from ..render.preview import look_at_camera, render_meshes, to_srgb8
     x, F = data["surface"], data["triangles"]
-    if "vertex_error" in data:
-        e, label = data["vertex_error"] * 1000, "vertex error"
-    else:
-        e, label = np.linalg.norm(x - x.mean(0) - (data["neutral"] - data["neutral"].mean(0)), axis=1) * 1000, \
-            "motion from the neutral"
-    vmax = max(float(np.percentile(e[np.isfinite(e)], 99)), 0.5)
+    e, label = _mesh_values(data)
+    vmax = _mesh_scale(e) if vmax is None else vmax
     colours = _heat(np.nan_to_num(e), vmax)
     c = x.mean(0)
     size = float(np.ptp(x, axis=0).max())
@@ -169,10 +195,10 @@ def _face_crop(data, shape, margin=0.25):
     return slice(lo[1], hi[1]), slice(lo[0], hi[0])
 
 
-def _fit_images(folder, quick=False):
+def _fit_images(folder, quick=False, heat_scale=None):
     """Pictures of one fit folder; returns (summary dict, {caption: file}). quick: the plate,
     render, wipe, error and curve pictures only (no 3D heat map or charts, 60 % of a curves-only
-    frame's time in a sequence)."""
+    frame's time in a sequence); heat_scale: the 3D heat map's top in mm (the page's shared one)."""
     folder = Path(folder)
     summary = json.loads((folder / "fit.json").read_text())
     pics = {}
@@ -204,7 +230,7 @@ def _fit_images(folder, quick=False):
             pics["the mouth, plate | render: plate curves (green), model (red)"] = mouth
     if quick:
         return summary, pics
-    pics["3D heat map"] = _mesh_heat(folder / "mesh_error.png", data, summary)
+    pics["3D heat map"] = _mesh_heat(folder / "mesh_error.png", data, summary, heat_scale)
     pics["blendshape weights"] = _bars(folder / "weights.png", summary["weights"], "blendshape weights", "weight")
     if summary.get("activations"):
         pics["muscle activations"] = _bars(folder / "activations.png", summary["activations"],
@@ -248,9 +274,10 @@ def write_report(run, title=None, quick=False):
     if not folders:
         raise InvfaceError(f"{run}: no fit.json here or in its sub-folders; run fit-plate or fit-scan first")
     sections, rows = [], []
+    scale = None if quick else _shared_mesh_scale(folders)       # the kinds' heat maps compare
     for f in folders:
         try:
-            summary, pics = _fit_images(f, quick)
+            summary, pics = _fit_images(f, quick, scale)
         except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError) as e:
             raise InvfaceError(f"{f}: unreadable fit result, fit.json or fit.npz truncated or corrupt "
                                f"({type(e).__name__}: {e}); fit again") from None
