@@ -187,17 +187,18 @@ def write_usd_takes(out, kinds, fps=24.0, single=False):
 
 
 def rig_frames(run, kind, single, model):
-    """The frames of one kind for a USD rig (``io.usd.write_usd_rig``): each fit.json's weights
-    by ``model``'s blendshape names, its jaw's transform and the head's pose, flagged frames left
-    out. None when the kind has no frames; InvfaceError when the fits were made with another
-    model (their surfaces have another vertex count)."""
+    """The frames of one kind for a rig (``io.usd.write_usd_rig``, ``io.gltf.write_glb``): each
+    fit.json's weights by ``model``'s blendshape names, its jaw's transform and the head's pose,
+    flagged frames left out; and the first frame's camera. Returns (frames, camera dict), None
+    when the kind has no frames; InvfaceError when the fits were made with another model (their
+    surfaces have another vertex count)."""
     from ..errors import InvfaceError
     from ..model.controls import FitVector
     from ..model.rig import euler_xyz
     take = take_frames(run, kind, single)
     if take is None:
         return None
-    frames, _, _ = take
+    frames, _, cam = take
     if len(frames[0]["points"]) != len(model.neutral):
         raise InvfaceError(f"{run}: its {kind} fits have {len(frames[0]['points'])} vertices, the model "
                            f"{len(model.neutral)}: pass the model the run was fitted with (--model)")
@@ -209,7 +210,7 @@ def rig_frames(run, kind, single, model):
         H[:3, :3], H[:3, 3] = euler_xyz(np.asarray(f["rotation"], float)), np.asarray(f["translation"], float)
         out.append({"frame": f["frame"], "weights": p[vec.weights], "jaw_matrix": model.jaw_matrix(p[vec.jaw]),
                     "head_matrix": H})
-    return out
+    return out, cam
 
 
 def write_rigs(out, kinds, model, fps=24.0, single=False, suffix=".usd"):
@@ -219,10 +220,10 @@ def write_rigs(out, kinds, model, fps=24.0, single=False, suffix=".usd"):
     from ..io.exporters import export
     paths = []
     for kind in kinds:
-        frames = rig_frames(out, kind, single, model)
-        if frames is None:
+        rig = rig_frames(out, kind, single, model)
+        if rig is None:
             continue
-        cam = take_frames(out, kind, single)[2]
+        frames, cam = rig
         data = {"fps": fps or 24.0, "camera": cam, "neutral": model.neutral, "triangles": model.triangles,
                 "names": list(model.blendshape_names), "deltas": model.blendshapes,
                 "jaw_weights": model.jaw_weights, "frames": frames}
@@ -250,10 +251,11 @@ def export(run_dir, formats=("csv",), fps=None, model=None):
     kind (``write_arkit_csv``: arkit_<kind>.csv), "usd" the take as a USD stage per kind
     (``write_usd_takes``: face_<kind>.usd: the fitted face's points per frame, the solved camera,
     the ARKit controls), "usdskel" and "gltf" the model's rig animated by the fit (``write_rigs``:
-    rig_<kind>.usd, rig_<kind>.glb; model: the model the run was fitted with, see ``run_model``). run_dir: a fit-plate output folder (a photo's,
-    with <kind>/fit.json, or a sequence's, with <frame>/<kind>/fit.json); fps: the clip's frame
-    rate (default run.json's, else 24). Returns the paths written; InvfaceError naming the folder
-    when it holds no fit, or an unknown format."""
+    rig_<kind>.usd, rig_<kind>.glb). run_dir: a fit-plate output folder (a photo's, with
+    <kind>/fit.json, or a sequence's, with <frame>/<kind>/fit.json); fps: the clip's frame rate
+    (default run.json's, else 24); model: the model the run was fitted with (``run_model``).
+    Returns the paths written; InvfaceError naming the folder when it holds no fit, or an
+    unknown format."""
     from ..errors import InvfaceError
     from .runs import read_run
     run = Path(run_dir)
