@@ -199,8 +199,8 @@ def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=
     camera, and the per-vertex error (V,) m against a truth when given) into ``folder``
     atomically; the report (``invface.report.fit``) reads them."""
     summary = dict(fit.summary(), plate=str(plate.path), **(extra or {}))
-    eyes = len(Eyes(model).sides) == 2
-    names = sorted(n for n in curves if n in model.curves or (eyes and n in IRIS_CURVES))
+    eyes = Eyes(model)
+    names = sorted(n for n in curves if n in model.curves or (len(eyes.sides) == 2 and n in IRIS_CURVES))
     arrays = {"plate": plate.image.astype(np.float32), "render": fit.render.astype(np.float32),
               "surface": fit.surface, "triangles": np.asarray(model.triangles),
               "neutral": model.neutral, "p": fit.p,
@@ -212,16 +212,17 @@ def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=
         arrays["mask"] = np.asarray(plate.mask, bool)
     for i, n in enumerate(names):
         arrays[f"curve_{i}"] = np.asarray(curves[n], float)
-        arrays[f"model_curve_{i}"] = projection_jacobian(plate.camera, model_curve(model, n, fit))[0]
+        arrays[f"model_curve_{i}"] = projection_jacobian(plate.camera, model_curve(model, eyes, n, fit))[0]
     return write_fit_files(folder, summary, arrays)
 
 
-def model_curve(model, name, fit):
+def model_curve(model, eyes, name, fit):
     """(n, 3) m posed: the model's curve ``name`` on the fit's surface, or for an iris curve
-    (``IRIS_CURVES``) the eye's limbus, closed, at the fit's gaze and pose."""
+    (``IRIS_CURVES``) the eye's limbus (``eyes``: the model's ``gaze.Eyes``), closed, at the
+    fit's gaze and pose."""
     if name not in IRIS_CURVES:
         return curve_points(model, name, fit.surface)
-    ring = Eyes(model).iris_ring(fit.p)[IRIS_CURVES.index(name)]
+    ring = eyes.iris_ring(fit.p)[IRIS_CURVES.index(name)]
     return pose_points(np.concatenate([ring, ring[:1]]), fit.rotation, fit.translation)
 
 

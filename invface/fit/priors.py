@@ -6,7 +6,7 @@ import numpy as np
 
 
 # The weights' L1 term: its slope is SPARSITY times the L2 regulariser's slope at weight 1 (so
-# a control moves off 0 only where the data pull on it is stronger than that). With 51 ARKit
+# a control moves off 0 only where the data pull on it is stronger than that). With ARKit's 52
 # controls an L2 prior alone lets the curves spread an expression, and the actor's identity,
 # over many of them; the L1 term keeps a fit to the few the image asks for (paper 000 Fig. 6).
 SPARSITY = 0.4
@@ -14,8 +14,8 @@ SPARSITY = 0.4
 
 # The eyeLook controls' share of the weights' L2 and L1 terms where the plate's irises fix the
 # gaze (``fit.curves.IRIS_CURVES``): a gaze is not an expression that the prior should hold at
-# rest, and at the full Eq. 15 lambda_1 (60 px per unit weight) a 0.5 look was fitted at half
-# its size with the pupils 9 px from the irises.
+# rest, and at the full Eq. 15 lambda_1 (60 px per unit weight) the prior outweighs the few
+# pixels an iris moves, so the fitted gaze would stop short of the irises.
 GAZE_PRIOR = 0.02
 
 
@@ -57,9 +57,8 @@ def prior_units(vec):
     the jaw's hinge (rad), the bound of its range for the jaw's other five DOF
     (``rig.JAW_LOWER`` / ``JAW_UPPER``: 0.15 rad of yaw and roll, 8 mm of slide), so that a DOF at
     its bound costs what a weight of 1 does (ARKit's jawLeft/Right/Forward are those ratios). In
-    rad and m they were all but free: 8 mm cost what a weight of 0.008 does, and on real photos
-    the curve fit slid the jaw to its 8 mm bounds to trace the head's outline (jawForward 1.0
-    where the photo's jaw is at rest)."""
+    rad and m they would be all but free (8 mm would cost what a weight of 0.008 does), and the
+    curve fit could slide the jaw to its bounds to trace the head's outline."""
     from ..model.rig import JAW_LOWER, JAW_UPPER
     u = np.ones(vec.P)
     u[vec.jaw][1:] = np.maximum(np.abs(JAW_LOWER), np.abs(JAW_UPPER))[1:]

@@ -11,7 +11,7 @@ the root, 1 at the tip, smoothstep between), times w:
 
 with the tongue's middle height y_mid and y_lift the height at which its thinned underside lies
 CLEARANCE above the lower incisors' edge: on the lower lip, which covers that edge when the jaw
-opens (at 0.3 rad the underside meets the lip's inner edge within 1.3 mm). REACH is measured from the model itself: the tip goes
+opens. REACH is measured from the model itself: the tip goes
 OUT_PAST_LIPS in front of the middle of the lower lip's inner edge at rest (the model curve
 lip_inner_lower; without it, OUT_PAST_INCISORS in front of the lower incisors). All of it is
 read from the model at rest, so a morphed actor's tongue reaches as far past its own lips. The tongue is not simulated: in the simulation kind the lips

@@ -147,11 +147,11 @@ def livelink_eyes(eyes):
     return out
 
 
-def take_frames(run, kind, single):
+def take_frames(run, kind, single, points=True):
     """The frames of one kind for a USD take (``io.usd.write_usd``): fit.json's values with each
-    frame's posed surface from its fit.npz (and the fit.json itself as "record"), flagged frames
-    left out (USD interpolates them), and the first frame's camera and triangles. Returns
-    (frames, triangles, camera dict) or None."""
+    frame's posed surface from its fit.npz (``points``; else the first frame's alone) and the
+    fit.json itself as "record", flagged frames left out (USD interpolates them), and the first
+    frame's camera and triangles. Returns (frames, triangles, camera dict) or None."""
     if single:
         f = Path(run) / kind / "fit.json"
         recs = [dict(json.loads(f.read_text()), _dir=str(f.parent))] if f.is_file() else []
@@ -163,11 +163,11 @@ def take_frames(run, kind, single):
         if r.get("flagged") or not npz.is_file():
             continue
         with np.load(npz, allow_pickle=False) as d:
-            points = d["surface"]
+            surface = d["surface"] if points or tri is None else None
             if tri is None:
                 tri, cam = d["triangles"], json.loads(str(d["camera"]))
         e = livelink_eyes(r.get("eyes"))
-        frames.append({"frame": r.get("frame", i), "points": points, "arkit": r.get("arkit", {}),
+        frames.append({"frame": r.get("frame", i), "points": surface, "arkit": r.get("arkit", {}),
                        "rotation": r.get("rotation", [0, 0, 0]), "translation": r.get("translation", [0, 0, 0]),
                        "eyes": e[[0, 1, 3, 4]], "record": r})
     return (frames, tri, cam) if frames else None
@@ -195,7 +195,7 @@ def rig_frames(run, kind, single, model):
     from ..errors import InvfaceError
     from ..model.controls import FitVector
     from ..model.rig import euler_xyz
-    take = take_frames(run, kind, single)
+    take = take_frames(run, kind, single, points=False)
     if take is None:
         return None
     frames, _, cam = take

@@ -76,8 +76,9 @@ def find_curves(model, plate, curves=None, detector=None, face=0):
     oval then becomes the plate's mask when it has none; ``detector(image_srgb, name)`` ->
     (478, 2) px replaces the single-image one, e.g. a ``fit.landmarks.LandmarkTracker`` in
     a sequence, and its attribute ``scores``, if any, the peer's ARKit scores that the plate
-    keeps as ``peer_arkit``, as the single-image detector's; face: which face the detector fits, 0 the first found, the whole frame first,
-    then crops around face proposals, largest first: ``fit.landmarks.detect_landmarks``).
+    keeps as ``peer_arkit``, as the single-image detector's; face: which face the detector
+    fits, 0 the first found, the whole frame first, then crops around face proposals, largest
+    first: ``fit.landmarks.detect_landmarks``).
     Curves mostly outside the plate are an InvfaceError
     (``fit.curves.check_curves``). Returns ({name: (n, 2) px}, source)."""
     from ..fit.curves import check_curves, read_curves
