@@ -202,7 +202,7 @@ def cmd_calibrate(args):
     """Lighting and albedo calibration (Eq. 14) on a neutral plate."""
     from .pipeline import as_plate, find_curves
     model = _load_model(args.model, args.resolution)
-    plate = as_plate(args.plate, args.camera)
+    plate = as_plate(args.plate, args.camera, args.colorspace)
     if args.auto_pose:
         if args.pose is not None:
             raise InvfaceError("give either --pose or --auto-pose, not both")
@@ -251,10 +251,11 @@ def cmd_fit_scan(args):
 
 
 def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False, workers=None, scheduler=None,
-                run=None, security=None):
+                run=None, security=None, exports=("csv", "usd")):
     """Fit a clip's frames (``pipeline.sequence.fit_sequence``) with bars, a line per finished
     kind and the report paths; on a Dask cluster with ``workers`` or ``scheduler``. run: more
-    keys for run.json (what the calibration was made from)."""
+    keys for run.json (what the calibration was made from); exports: the formats written at the
+    end (``pipeline.outputs.EXPORT_FORMATS``; the rigs from ``model``)."""
     from .pipeline import open_clip
     from .pipeline.outputs import curve_rows, jitter, sequence_records
     from .pipeline.sequence import fit_sequence
@@ -280,7 +281,7 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
     try:
         rows = fit_sequence(model, clip, cal, out, kinds, curves=curves, progress=bars, on_kind=kind_done,
                             on_frame=frame_done, force=force, keep=False, workers=workers, scheduler=scheduler,
-                            extra=run, security=security, **options)
+                            extra=run, security=security, exports=exports, **options)
     finally:
         bars.close()
     distributed = (workers or scheduler) and len(clip) > 1
@@ -309,6 +310,11 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
         first = rows[0] if rows else {}
         raise InvfaceError(first.get("error") or f"{first.get('name', clip.source)}: no model kind finished: "
                            + "; ".join(f"{k}: {why}" for k, why in first.get("failed", {}).items()))
+    rigs = [f for f in exports if f in ("usdskel", "gltf")]
+    if rigs and out is not None:
+        from .pipeline.outputs import export
+        for path in export(out, rigs, model=model):
+            print(f"the rig animated by the fit: {path}", flush=True)
 
 
 def cmd_fit_plate(args):
@@ -326,7 +332,7 @@ def cmd_fit_plate(args):
     model = _load_model(args.model, args.resolution)
     # a given calibration is read before any work (the identity keeps the vertex count)
     given = Calibration.load(args.calib, vertex_count=len(model.neutral)) if args.calib else None
-    clip = open_clip(args.plate, args.frames, args.camera)
+    clip = open_clip(args.plate, args.frames, args.camera, args.colorspace)
     print(clip.describe(), flush=True)
     kinds = model_kinds(args.model_kind)
     out = Path(args.output) if args.output else Path("reports") / "fit-plate" / Path(args.plate).stem
@@ -335,10 +341,11 @@ def cmd_fit_plate(args):
     frame = pose = None
     if not args.calib or identity:
         if args.neutral_frame is not None:
-            if args.neutral_frame not in clip.indices:
+            numbers = [clip.numbers[i] for i in clip.indices]
+            if args.neutral_frame not in numbers:
                 raise InvfaceError(f"--neutral-frame {args.neutral_frame}: not among the selected frames "
-                                   f"({clip.indices[0]}..{clip.indices[-1]})")
-            pos = clip.indices.index(args.neutral_frame)
+                                   f"({numbers[0]}..{numbers[-1]})")
+            pos = numbers.index(args.neutral_frame)
             frame = next(clip.frames(pos, pos + 1))
             curves, source = find_curves(model, frame.plate, args.curves, face=args.face)
         elif len(clip) == 1:
@@ -388,7 +395,7 @@ def cmd_fit_plate(args):
     if args.face:
         options["face"] = args.face
     _fit_frames(model, clip, cal, kinds, out, options, curves=args.curves, force=args.restart,
-                workers=args.workers, scheduler=args.scheduler, run=run, security=security)
+                workers=args.workers, scheduler=args.scheduler, run=run, security=security, exports=args.export)
     return 0
 
 
@@ -455,6 +462,11 @@ def _demo_fit(model, out):
 CURVE_LAMBDA_HELP = ("weight regulariser lambda_1 of the curve fit, Eq. 15 (px^2; default: the paper's 3600 "
                      "scaled with the face's size, 3600 (d / 224)^2 for a face d px between the outer eye "
                      "corners, 224 on the sample plates)")
+COLORSPACE_HELP = ("the plate files' colour space, converted to linear Rec.709 for Eq. 14/16: sRGB, linear, "
+                   "Cineon, or a colour space of OpenColorIO's ACES studio config (ACEScct, ACEScg, "
+                   "'ARRI LogC3 (EI800)', 'S-Log3 S-Gamut3', ...; docs/formats.md); default: sRGB for "
+                   "8/16-bit integer files and video, linear for float files (EXR), the DPX header's "
+                   "transfer for DPX (Cineon log when it says printing density, log or nothing)")
 
 
 def _number(cast, low=None, strict=False):
@@ -489,6 +501,25 @@ NON_NEGATIVE = _number(float, 0)
 FINITE = _number(float)
 COUNT = _number(int, 1)
 NON_NEGATIVE_INT = _number(int, 0)
+
+
+def EXPORTS(text):
+    """argparse type: comma-separated export formats (``pipeline.outputs.EXPORT_FORMATS``)."""
+    from .pipeline.outputs import EXPORT_FORMATS
+    formats = tuple(f.strip().lower() for f in text.split(",") if f.strip())
+    bad = [f for f in formats if f not in EXPORT_FORMATS]
+    if bad or not formats:
+        raise argparse.ArgumentTypeError(f"{text!r}: use one or more of {', '.join(EXPORT_FORMATS)}")
+    return formats
+
+
+def COLORSPACE(text):
+    """argparse type: a colour-space name (``io.colorspaces.resolve``), checked before any work."""
+    from .io.colorspaces import resolve
+    try:
+        return resolve(text)
+    except InvfaceError as e:
+        raise argparse.ArgumentTypeError(f"{text!r}: " + str(e).split(": ", 1)[1]) from None
 
 
 def build_parser():
@@ -532,7 +563,8 @@ def build_parser():
     s.add_argument("--preview", help="write a PNG: neutral (top) and posed (bottom), front and 3/4")
     s.set_defaults(func=cmd_simulate)
     c = sub.add_parser("calibrate", help="solve SH lighting and per-vertex albedo on a neutral plate (Eq. 14)")
-    c.add_argument("plate", help="plate image (PNG/JPEG sRGB or linear EXR)")
+    c.add_argument("plate", help="plate image (EXR, DPX, TIFF, PNG, JPEG, ...; see --colorspace)")
+    c.add_argument("--colorspace", type=COLORSPACE, help=COLORSPACE_HELP)
     c.add_argument("--camera", help="JSON camera file (default: PLATE.json beside the plate, else the "
                                     "front view)")
     c.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
@@ -564,12 +596,20 @@ def build_parser():
     fs.set_defaults(func=cmd_fit_scan)
     fp = sub.add_parser("fit-plate", help="fit controls and pose to a film plate: curves (Eq. 15), then "
                                           "shape from shading (Eq. 16); a folder is a sequence")
-    fp.add_argument("plate", help="plate image (PNG/JPEG/EXR), a video (MP4/MOV/AVI/MKV) or a folder of frames: "
+    fp.add_argument("plate", help="plate image (EXR, DPX, TIFF, PNG, JPEG, ...), a numbered sequence "
+                                  "(shot.####.dpx, shot.%%04d.exr), a video (MP4/MOV/AVI/MKV) or a folder of frames: "
                                   "a sequence, each frame warm-started from the one before")
-    fp.add_argument("--frames", help="frames of a video or folder to fit: START:STOP[:STEP] (Python slice, "
-                                     "e.g. 0:72:2) or one index; default all")
-    fp.add_argument("--neutral-frame", type=NON_NEGATIVE_INT, help="frame index to calibrate on when no --calib (default: the "
-                                                      "most neutral-looking of 8 frames spread over the selection)")
+    fp.add_argument("--frames", help="frames to fit: FIRST-LAST[xSTEP] in the source's own frame numbers, both ends "
+                                     "included as in VFX ranges (e.g. 1001-1072x2), or START:STOP[:STEP] positions "
+                                     "(Python slice, end left out, e.g. 0:72:2), or one position; default all")
+    fp.add_argument("--colorspace", type=COLORSPACE, help=COLORSPACE_HELP)
+    fp.add_argument("--export", type=EXPORTS, default=("csv", "usd"), metavar="FORMATS",
+                    help="what the run writes for the user's pipeline, comma-separated: csv (Live Link Face, "
+                         "arkit_<kind>.csv), usd (the take: face_<kind>.usd with the camera and the plate card), "
+                         "usdskel (the rig in UsdSkel, rig_<kind>.usd), gltf (the rig, rig_<kind>.glb); "
+                         "default csv,usd; 'invface export' writes them later")
+    fp.add_argument("--neutral-frame", type=NON_NEGATIVE_INT, help="frame number to calibrate on when no --calib "
+                    "(default: the most neutral-looking of 8 frames spread over the selection)")
     fp.add_argument("--temporal", type=NON_NEGATIVE, default=TEMPORAL_LAMBDA,
                     help="weight of the temporal term between consecutive frames (px^2 per 0.1 weight, 0.01 rad "
                          f"or 1 mm; scaled with the face like lambda_1; default {TEMPORAL_LAMBDA:g}, 0 = off)")

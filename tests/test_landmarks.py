@@ -62,15 +62,23 @@ def test_a_real_photo_fits_end_to_end_with_both_models(photo, tmp_path):
     """One command per photo: curves from the detector, pose from them, light and albedo
     calibrated on the photo itself, both model kinds fitted and reported (small head, few
     shading iterations: the figures of the default head are in bench/RESULTS.md)."""
-    path = PHOTOS / photo
-    if photo == "astronaut":
+    path, more = PHOTOS / photo, []
+    if photo == "astronaut":       # delivered as a VFX plate: a 10-bit Cineon-log DPX, all exports asked for
+        import OpenImageIO as oiio
         from skimage.data import astronaut
 
-        from invface.render.plates import srgb_to_linear, write_image
-        path = write_image(tmp_path / "astronaut.png", srgb_to_linear(astronaut() / 255.0).astype(np.float32))
+        from invface.io.colorspaces import from_linear, to_linear
+        path, more = tmp_path / "astronaut.dpx", ["--export", "csv,usd,usdskel,gltf"]
+        code = from_linear(to_linear(astronaut() / 255.0, "sRGB"), "Cineon")
+        spec = oiio.ImageSpec(code.shape[1], code.shape[0], 3, oiio.UINT16)
+        spec.attribute("oiio:BitsPerSample", 10)
+        spec.attribute("dpx:Transfer", "Printing density")
+        dpx = oiio.ImageOutput.create(str(path))
+        assert dpx.open(str(path), spec) and dpx.write_image(np.ascontiguousarray(code, np.float32))
+        dpx.close()
     out = tmp_path / "out"
     r = subprocess.run([sys.executable, "-m", "invface.cli", "fit-plate", str(path), "--model-kind", "both",
-                        "--resolution", str(SMALL_RESOLUTION), "--iterations", "3", "-o", str(out)],
+                        "--resolution", str(SMALL_RESOLUTION), "--iterations", "3", "-o", str(out), *more],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr[-3000:]
     assert "Traceback" not in r.stderr
@@ -92,6 +100,13 @@ def test_a_real_photo_fits_end_to_end_with_both_models(photo, tmp_path):
     # the actor's identity first (its proportions and field), said on the page
     assert (out / "actor.npz").is_file() and "face width x" in r.stdout
     assert "The model was adapted to the face of" in page or "The model is used as it is" in page
+    # what the pipeline gets: the Live Link Face CSV and the USD take (with its plate card) by default,
+    # the rigs when asked; the colour space the plate was read in is on the page
+    assert (out / "arkit_blendshape.csv").is_file() and (out / "face_simulation.usd").is_file()
+    assert (out / "plates" / "plate.jpg").is_file()
+    if photo == "astronaut":
+        assert all(fit["plate_colorspace"] == "Cineon" for fit in fits.values()) and "plate read as Cineon" in page
+        assert (out / "rig_blendshape.glb").is_file() and (out / "rig_simulation.usd").is_file()
 
 
 @needs_detector

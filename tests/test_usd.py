@@ -61,7 +61,9 @@ def _clip(tmp_path, model):
             "frame": 10 + i, "arkit": arkit, "rotation": rot.tolist(), "translation": tr.tolist(),
             "eyes": {"L": {"yaw": 0.05 * i, "pitch": 0.0}, "R": {"yaw": 0.05 * i, "pitch": 0.01}},
             "flagged": "curves jumped" if i == 1 else ""}))
-        np.savez(d / "fit.npz", surface=xr, triangles=model.triangles, camera=np.array(json.dumps(cam.to_dict())))
+        plate = np.full((cam.height, cam.width, 3), 0.1 * (i + 1), np.float32)
+        np.savez(d / "fit.npz", surface=xr, triangles=model.triangles, camera=np.array(json.dumps(cam.to_dict())),
+                 plate=plate)
     return run, cam, surfaces
 
 
@@ -95,6 +97,18 @@ def test_a_take_reads_back_in_usd_and_its_camera_projects_as_ours(tmp_path, smal
     ndc = h[:, :2] / h[:, 3:4]
     uv = np.c_[(ndc[:, 0] + 1) / 2 * cam.width - 0.5, (1 - ndc[:, 1]) / 2 * cam.height - 0.5]
     np.testing.assert_allclose(uv, cam.project(surfaces[0])[0], atol=1e-3)
+    # the plate card: behind the face, filling the view, its texture each frame's plate
+    card = np.array(UsdGeom.Mesh(stage.GetPrimAtPath("/Capture/Plate")).GetPointsAttr().Get())
+    hc = np.c_[card, np.ones(4)] @ V @ P
+    corners = np.c_[(hc[:, 0] / hc[:, 3] + 1) / 2 * cam.width - 0.5, (1 - hc[:, 1] / hc[:, 3]) / 2 * cam.height - 0.5]
+    np.testing.assert_allclose(corners, [[-0.5, -0.5], [639.5, -0.5], [639.5, 479.5], [-0.5, 479.5]], atol=1e-2)
+    view_depth = lambda x: -(np.c_[x, np.ones(len(x))] @ V)[:, 2]
+    assert view_depth(card).min() > view_depth(np.array(pts.Get(10))).max()
+    assert gf.clippingRange.max > view_depth(card).max()
+    texture = stage.GetPrimAtPath("/Capture/PlateMaterial/Texture").GetAttribute("inputs:file")
+    assert [texture.Get(t).path for t in (10, 12)] == ["plates/f0.jpg", "plates/f2.jpg"]
+    from invface.io.images import load_image
+    assert load_image(run / "plates" / "f2.jpg").rgb.mean() == pytest.approx(0.3, abs=0.01)
 
 
 def test_export_refuses_an_unknown_format(tmp_path):

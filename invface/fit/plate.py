@@ -199,6 +199,8 @@ def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=
     camera, and the per-vertex error (V,) m against a truth when given) into ``folder``
     atomically; the report (``invface.report.fit``) reads them."""
     summary = dict(fit.summary(), plate=str(plate.path), **(extra or {}))
+    if getattr(plate, "colorspace", ""):
+        summary["plate_colorspace"] = plate.colorspace
     eyes = Eyes(model)
     names = sorted(n for n in curves if n in model.curves or (len(eyes.sides) == 2 and n in IRIS_CURVES))
     arrays = {"plate": plate.image.astype(np.float32), "render": fit.render.astype(np.float32),

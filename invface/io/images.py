@@ -1,38 +1,42 @@
 """Images in and out, in linear light.
 
-Inside invface images are linear-light float32 (H, W, 3). PNG and JPEG (8 or 16 bit) are
-decoded from sRGB through colour-science; EXR is already linear (OpenEXR). Reports write
+Inside invface images are linear-light float32 (H, W, 3). Files are read with OpenImageIO
+(DPX, Cineon, EXR, TIFF 8/16/32-bit, PNG, JPEG, PPM/PGM, BMP, WebP, HDR), turned upright by
+their EXIF orientation, and converted from their colour space to the working space by
+``io.colorspaces`` (the default depends on the format and the header; ``colorspace`` names
+another). Without OpenImageIO, OpenCV reads PNG and JPEG and OpenEXR reads EXR. Reports write
 display-encoded pictures (``write_display_image``) and matplotlib figures (``save_figure``).
 Every write is atomic.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import ImageError
+from . import colorspaces
 from .atomic import atomic_path, write_bytes
 
 SRGB_EXTS = {".png", ".jpg", ".jpeg"}
-EXTS = SRGB_EXTS | {".exr"}
+EXTS = SRGB_EXTS | {".exr"}                                    # written by write_image
+OIIO_EXTS = {".dpx", ".cin", ".tif", ".tiff", ".ppm", ".pgm", ".pnm", ".bmp", ".webp", ".hdr", ".pfm"}
+READ_EXTS = EXTS | OIIO_EXTS                                   # read by read_image
 
 
 def srgb_to_linear(a):
     """sRGB-encoded values in [0, 1] -> linear light (colour-science's sRGB EOTF)."""
-    import colour
-    return np.asarray(colour.cctf_decoding(np.asarray(a, np.float64), function="sRGB"), np.float32)
+    return colorspaces.to_linear(a, colorspaces.SRGB)
 
 
 def linear_to_srgb(a):
     """Linear light -> sRGB-encoded values (clipped to [0, 1])."""
-    import colour
-    return np.asarray(colour.cctf_encoding(np.clip(np.asarray(a, np.float64), 0, 1), function="sRGB"),
-                      np.float32)
+    return colorspaces.from_linear(a, colorspaces.SRGB)
 
 
 def _check_complete(path, data):
-    """Truncated PNG/JPEG files still half-decode in OpenCV; check their end markers."""
+    """Truncated PNG/JPEG files still half-decode; check their end markers."""
     ext = path.suffix.lower()
     if ext == ".png" and (data[:8] != b"\x89PNG\r\n\x1a\n" or b"IEND" not in data[-64:]):
         raise ImageError(f"{path}: not a complete PNG file (truncated or corrupted)")
@@ -40,19 +44,48 @@ def _check_complete(path, data):
         raise ImageError(f"{path}: not a complete JPEG file (truncated or corrupted)")
 
 
-def read_image(path):
-    """Read an image as linear float32 RGB (H, W, 3), plus its alpha (H, W) or None.
+@dataclass
+class Decoded:
+    """A file's pixels before colour conversion: code values (H, W, C) float32 (integers
+    scaled to [0, 1] by their bit depth), channel names, the format's name, bits per sample,
+    whether the samples are float, and the header's attributes."""
 
-    PNG/JPEG (8/16-bit, grey or colour) are sRGB-decoded; EXR channels R, G, B (and A) are
-    taken as linear. Raises ImageError naming the file for unreadable, truncated or
-    non-finite images."""
-    path = Path(path)
+    pixels: np.ndarray
+    channels: tuple
+    format: str
+    bits: int
+    is_float: bool
+    attrs: dict
+
+
+def _decode_oiio(path, oiio):
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise ImageError(f"{path}: unreadable image file ({oiio.geterror().strip() or 'unknown format'})")
+    try:
+        spec, fmt = inp.spec(), inp.format_name()
+        attrs = {a.name: a.value for a in spec.extra_attribs}
+        is_float = spec.format.basetype in (oiio.FLOAT, oiio.HALF, oiio.DOUBLE)
+        bits = int(attrs.get("oiio:BitsPerSample", spec.format.size() * 8))
+        if int(attrs.get("Orientation", 1)) != 1:          # EXIF orientation: turn the image upright
+            buf = oiio.ImageBufAlgo.reorient(oiio.ImageBuf(str(path)))
+            px = buf.get_pixels(oiio.FLOAT)
+        else:
+            px = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+        if px is None:
+            raise ImageError(f"{path}: unreadable {fmt} image ({inp.geterror().strip() or 'truncated or corrupted'})")
+    finally:
+        inp.close()
+    px = np.asarray(px, np.float32).reshape(px.shape[0], px.shape[1], -1)
+    if not is_float and bits < spec.format.size() * 8:   # 10/12-bit codes stored in 16 bits
+        top = float(2 ** bits - 1)
+        px = np.round(px * top) / top
+    return Decoded(px, tuple(spec.channelnames), fmt, bits, is_float, attrs)
+
+
+def _decode_fallback(path):
+    """PNG/JPEG through OpenCV and EXR through OpenEXR, when OpenImageIO is not installed."""
     ext = path.suffix.lower()
-    if ext not in EXTS:
-        raise ImageError(f"{path}: unsupported image type '{ext}' (use PNG, JPEG or EXR)")
-    if not path.is_file():
-        raise ImageError(f"{path}: image file not found")
-    alpha = None
     if ext == ".exr":
         import OpenEXR
         try:
@@ -60,36 +93,109 @@ def read_image(path):
                 ch = {k: np.asarray(v.pixels, np.float32) for k, v in f.channels().items()}
         except Exception as e:  # noqa: BLE001 - OpenEXR raises plain exceptions
             raise ImageError(f"{path}: unreadable EXR file ({e})") from None
-        if all(k in ch for k in "RGB"):
-            rgb = np.stack([ch["R"], ch["G"], ch["B"]], -1)
-        elif "Y" in ch:
-            rgb = np.repeat(ch["Y"][..., None], 3, -1)
-        else:
-            raise ImageError(f"{path}: EXR has no R, G, B or Y channels (has {sorted(ch)})")
-        alpha = ch.get("A")
+        names = tuple(ch)
+        return Decoded(np.stack([ch[n] for n in names], -1), names, "openexr", 32, True, {})
+    if ext not in SRGB_EXTS:
+        raise ImageError(f"{path}: reading '{ext}' files needs OpenImageIO (pip install openimageio)")
+    import cv2
+    img = cv2.imdecode(np.frombuffer(path.read_bytes(), np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None or img.size == 0:
+        raise ImageError(f"{path}: unreadable image file")
+    scale = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(img.dtype)
+    if scale is None:
+        raise ImageError(f"{path}: unsupported pixel type {img.dtype} (8 or 16 bit expected)")
+    img = img.astype(np.float32) / scale
+    img = img[..., None] if img.ndim == 2 else img[..., [2, 1, 0, 3][:img.shape[2]]] if img.shape[2] >= 3 else img
+    names = {1: ("Y",), 2: ("Y", "A"), 3: tuple("RGB"), 4: tuple("RGBA")}[img.shape[2]]
+    return Decoded(img, names, ext.lstrip(".").replace("jpg", "jpeg"), int(scale).bit_length(), False, {})
+
+
+def decode_image(path):
+    """A file's pixels and header before colour conversion (``Decoded``). Raises ImageError
+    naming the file for a missing, unsupported, truncated or unreadable one."""
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext not in READ_EXTS:
+        raise ImageError(f"{path}: unsupported image type '{ext}' (read: {', '.join(sorted(READ_EXTS))})")
+    if not path.is_file():
+        raise ImageError(f"{path}: image file not found")
+    if ext in SRGB_EXTS:
+        _check_complete(path, path.read_bytes())
+    try:
+        import OpenImageIO as oiio
+    except ImportError:
+        return _decode_fallback(path)
+    return _decode_oiio(path, oiio)
+
+
+def header(path):
+    """An image file's header attributes ({name: value}, OpenImageIO's names), read without
+    its pixels; {} when OpenImageIO is not installed or cannot open the file."""
+    try:
+        import OpenImageIO as oiio
+    except ImportError:
+        return {}
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        oiio.geterror()
+        return {}
+    try:
+        return {a.name: a.value for a in inp.spec().extra_attribs}
+    finally:
+        inp.close()
+
+
+def _rgb_alpha(path, d):
+    """(H, W, 3) colour and (H, W) alpha or None from the decoded channels, by name."""
+    idx = {n.split(".")[-1].upper(): i for i, n in enumerate(d.channels)}
+    px = d.pixels
+    if all(c in idx for c in "RGB"):
+        rgb = px[..., [idx["R"], idx["G"], idx["B"]]]
+    elif "Y" in idx or px.shape[2] in (1, 2):
+        rgb = np.repeat(px[..., idx.get("Y", 0)][..., None], 3, -1)
+    elif px.shape[2] >= 3:
+        rgb = px[..., :3]
     else:
-        import cv2
-        data = path.read_bytes()
-        _check_complete(path, data)
-        img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-        if img is None or img.size == 0:
-            raise ImageError(f"{path}: unreadable image file")
-        scale = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(img.dtype)
-        if scale is None:
-            raise ImageError(f"{path}: unsupported pixel type {img.dtype} (8 or 16 bit expected)")
-        img = img.astype(np.float32) / scale
-        if img.ndim == 2:
-            img = np.repeat(img[..., None], 3, -1)
-        elif img.shape[2] == 4:
-            alpha = img[..., 3]
-            img = img[..., 2::-1]
-        else:
-            img = img[..., 2::-1] if img.shape[2] == 3 else np.repeat(img[..., :1], 3, -1)
-        rgb = srgb_to_linear(img)
+        raise ImageError(f"{path}: no R, G, B or Y channels (has {', '.join(d.channels)})")
+    return rgb, (px[..., idx["A"]] if "A" in idx else None)
+
+
+@dataclass
+class LinearImage:
+    """An image read into the working space: rgb (H, W, 3) float32 linear, alpha (H, W) or
+    None, the colour space it was read in, and why that one (``--colorspace``, or the
+    format's default)."""
+
+    rgb: np.ndarray
+    alpha: np.ndarray | None
+    colorspace: str
+    reason: str
+
+
+def load_image(path, colorspace=None):
+    """Read an image file into linear light (``LinearImage``), converting from
+    ``colorspace`` (a name ``io.colorspaces.resolve`` takes) or the file's default
+    (``io.colorspaces.default_for``). Raises ImageError naming the file for unreadable,
+    truncated or non-finite images."""
+    path = Path(path)
+    d = decode_image(path)
+    if colorspace:
+        space, why = colorspaces.resolve(colorspace), "given with --colorspace"
+    else:
+        space, why = colorspaces.default_for(d.format, d.bits, d.is_float, d.attrs)
+    code, alpha = _rgb_alpha(path, d)
+    rgb = colorspaces.to_linear(code, space)
     if not np.all(np.isfinite(rgb)):
         bad = int((~np.isfinite(rgb)).any(-1).sum())
         raise ImageError(f"{path}: {bad} pixels are not finite (NaN or Inf)")
-    return np.ascontiguousarray(rgb, np.float32), alpha
+    return LinearImage(np.ascontiguousarray(rgb, np.float32), alpha, space, why)
+
+
+def read_image(path, colorspace=None):
+    """Read an image as linear float32 RGB (H, W, 3), plus its alpha (H, W) or None
+    (``load_image``)."""
+    im = load_image(path, colorspace)
+    return im.rgb, im.alpha
 
 
 def write_image(path, image, bits=8):

@@ -15,6 +15,11 @@ The point cache's stage (``write_usd``):
     /Capture/Camera           Camera: the plate's solved camera (focal length and apertures in
                               mm, tenths of the stage unit, on a 36 mm film back; the principal
                               point as aperture offsets)
+    /Capture/Plate            Mesh: a card behind the face that fills the camera's view, textured
+                              with the (undistorted) plate of each frame through a
+                              UsdPreviewSurface (its file input sampled per frame), so that
+                              looking through the camera shows the face over the plate; the
+                              plate files' own paths are in its customData (invface:plates)
 
 Time codes are the take's frame numbers at ``timeCodesPerSecond`` = the clip's rate; a frame
 with no sample (a flagged frame) is interpolated by USD from its neighbours. OpenCV's camera
@@ -75,8 +80,9 @@ def write_usd(path, data):
     """Write the take's stage to ``path`` (.usd, .usda or .usdc) atomically. data: {"fps": float,
     "triangles": (F, 3) int, "camera": {"K" (3,3), "R" (3,3), "t" (3,), "width", "height"},
     "frames": [{"frame": int, "points": (V, 3) m posed, "arkit": {name: value},
-    "rotation" (3,) rad, "translation" (3,) m, "eyes" (4,) rad}]} (frames in time order).
-    Returns the Path."""
+    "rotation" (3,) rad, "translation" (3,) m, "eyes" (4,) rad}]} (frames in time order);
+    optional "plates": {frame: image path relative to ``path``'s folder} for the card behind
+    the face and "plate_sources": [the plate files the fit read]. Returns the Path."""
     Gf, Sdf, Usd, UsdGeom, Vt = _pxr()
     frames = list(data["frames"])
     if not frames:
@@ -85,7 +91,9 @@ def write_usd(path, data):
     with atomic_path(path) as tmp:
         stage = _stage(tmp, frames, data.get("fps"), Usd, UsdGeom)
         _face(stage, frames, tri, Gf, Sdf, UsdGeom, Vt)
-        _camera(stage, data["camera"], Gf, UsdGeom)
+        depth = _camera(stage, data["camera"], Gf, UsdGeom, frames[0]["points"])
+        if data.get("plates"):
+            _plate_card(stage, data["camera"], data["plates"], data.get("plate_sources", []), depth)
         stage.GetRootLayer().Save()
     return Path(path)
 
@@ -129,14 +137,66 @@ def _face(stage, frames, tri, Gf, Sdf, UsdGeom, Vt):
         eyes.Set(Vt.FloatArray(np.asarray(f.get("eyes", np.zeros(4)), float).tolist()), t)
 
 
-def _camera(stage, camera, Gf, UsdGeom):
+def _camera(stage, camera, Gf, UsdGeom, points=None):
+    """The camera prim; its far clipping plane lies beyond the plate card (twice the face's
+    farthest depth ``points`` (V, 3) m, when given). Returns that card depth (m)."""
     cam = {k: (np.asarray(v, float) if k in ("K", "R", "t") else v) for k, v in camera.items()}
     usd = UsdGeom.Camera.Define(stage, "/Capture/Camera")
     usd.AddTransformOp().Set(_matrix(Gf, camera_to_world(cam)))
     for k, v in lens(cam).items():
         usd.GetPrim().GetAttribute(k).Set(float(v))
-    usd.CreateClippingRangeAttr(Gf.Vec2f(0.01, 100.0))
+    depth = 1.0
+    if points is not None:
+        z = (np.asarray(points, float) @ cam["R"].T + cam["t"])[:, 2]
+        depth = 2.0 * float(z.max()) if np.all(np.isfinite(z)) and z.max() > 0 else depth
+    usd.CreateClippingRangeAttr(Gf.Vec2f(0.01, float(2.0 * depth * UNITS_PER_M)))
     usd.CreateProjectionAttr(UsdGeom.Tokens.perspective)
+    return depth
+
+
+def card_corners(camera, depth):
+    """(4, 3) m: the plate's outer pixel corners (top-left, top-right, bottom-right,
+    bottom-left) back-projected to ``depth`` in front of the camera, in the world frame."""
+    K, w, h = np.asarray(camera["K"], float), camera["width"], camera["height"]
+    R, t = np.asarray(camera["R"], float), np.asarray(camera["t"], float)
+    uv = np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]])
+    x = np.c_[(uv[:, 0] - K[0, 2]) / K[0, 0], (uv[:, 1] - K[1, 2]) / K[1, 1], np.ones(4)] * depth
+    return (x - t) @ R
+
+
+def _plate_card(stage, camera, plates, sources, depth):
+    """/Capture/Plate: the card at ``depth`` (m) filling the camera's view, textured per frame
+    with ``plates`` ({frame: relative image path}) through UsdPreviewSurface (emissive, so that
+    no light is needed; its diffuse black)."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade, Vt
+    card = UsdGeom.Mesh.Define(stage, "/Capture/Plate")
+    x = (card_corners(camera, depth) * UNITS_PER_M).astype(np.float32)
+    card.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(x))
+    card.CreateFaceVertexCountsAttr(Vt.IntArray([4]))
+    card.CreateFaceVertexIndicesAttr(Vt.IntArray([0, 3, 2, 1]))          # facing the camera
+    card.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    card.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*x.min(0).tolist()), Gf.Vec3f(*x.max(0).tolist())]))
+    st = UsdGeom.PrimvarsAPI(card).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+    st.Set(Vt.Vec2fArray([Gf.Vec2f(0, 1), Gf.Vec2f(0, 0), Gf.Vec2f(1, 0), Gf.Vec2f(1, 1)]))
+    card.GetPrim().SetCustomDataByKey("invface:plates", Vt.StringArray([str(s) for s in sources]))
+    material = UsdShade.Material.Define(stage, "/Capture/PlateMaterial")
+    surface = UsdShade.Shader.Define(stage, "/Capture/PlateMaterial/Surface")
+    surface.CreateIdAttr("UsdPreviewSurface")
+    surface.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0, 0, 0))
+    reader = UsdShade.Shader.Define(stage, "/Capture/PlateMaterial/UV")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+    texture = UsdShade.Shader.Define(stage, "/Capture/PlateMaterial/Texture")
+    texture.CreateIdAttr("UsdUVTexture")
+    texture.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
+    texture.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+    file = texture.CreateInput("file", Sdf.ValueTypeNames.Asset)
+    for frame, image in sorted(plates.items()):
+        file.Set(Sdf.AssetPath(str(image)), float(frame))
+    rgb = texture.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+    surface.CreateInput("emissiveColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(rgb)
+    material.CreateSurfaceOutput().ConnectToSource(surface.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(card.GetPrim()).Bind(material)
 
 
 def write_usd_rig(path, data):

@@ -29,14 +29,16 @@ from .scans import ScanResult, fit_scan
 from .simulate import Simulation, simulate
 
 
-def calibrate(plate, model=None, pose="auto", curves=None, camera=None, lam=None, max_iter=30, progress=None):
+def calibrate(plate, model=None, pose="auto", curves=None, camera=None, lam=None, max_iter=30, progress=None,
+              colorspace=None):
     """Lighting and albedo on a plate (Eq. 14). plate: a path or Plate; model: a FaceModel,
     bundle path or None (the template); pose: "auto" (pose and expression from the plate's
     curves, Eq. 15, and lambda scaled with the face's size) or (rotation (3,) rad,
-    translation (3,) m) for the neutral; curves: see ``find_curves``. Returns a
+    translation (3,) m) for the neutral; curves: see ``find_curves``; colorspace: the plate
+    file's colour space (``io.colorspaces``; None: its format's default). Returns a
     PlateCalibration (``save(path)``: the .npz and PATH_compare.png)."""
     model = load_model(model)
-    plate = as_plate(plate, camera)
+    plate = as_plate(plate, camera, colorspace)
     if isinstance(pose, str):
         if pose != "auto":
             raise ConfigError(f"pose must be 'auto' or (rotation, translation), not {pose!r}")
@@ -48,16 +50,17 @@ def calibrate(plate, model=None, pose="auto", curves=None, camera=None, lam=None
 
 
 def fit_plate(plate, calibration=None, model=None, kinds=("blendshape",), curves=None, camera=None,
-              progress=None, **options):
+              progress=None, colorspace=None, **options):
     """Fit controls and pose to a plate (Eq. 15-16) with one or both model kinds ("both").
     calibration: a PlateCalibration, Calibration or .npz path, or None to calibrate on the
-    plate itself (``calibrate(pose="auto")``); other options as ``fit_frame`` (iterations,
+    plate itself (``calibrate(pose="auto")``); colorspace: the plate file's colour space
+    (``io.colorspaces``; None: its format's default); other options as ``fit_frame`` (iterations,
     shading, lam_curves, solver, starts). Returns a FrameFit: ``fit[kind]`` is the kind's
     PlateFit (weights, jaw, rotation, translation, activations, curve_rms_px, seconds),
     ``fit.truth`` the errors against a ground truth beside the plate, ``fit.save(dir)``."""
     from ..fit.calibrate import Calibration
     model = load_model(model)
-    plate = as_plate(plate, camera)
+    plate = as_plate(plate, camera, colorspace)
     found, source = find_curves(model, plate, curves)
     if calibration is None:
         calibration = auto_calibrate(model, plate, found, source, progress=progress)

@@ -174,16 +174,42 @@ def take_frames(run, kind, single, points=True):
 
 
 def write_usd_takes(out, kinds, fps=24.0, single=False):
-    """out/face_<kind>.usd per kind: the take as a USD stage (``io.usd``). Returns the paths."""
+    """out/face_<kind>.usd per kind: the take as a USD stage (``io.usd``), with the frames'
+    plates (out/plates/<frame>.jpg, written once for all kinds) on a card behind the face.
+    Returns the paths of the USD files."""
     from ..io.exporters import export
-    paths = []
+    paths, written = [], {}
     for kind in kinds:
         take = take_frames(out, kind, single)
         if take is not None:
             frames, tri, cam = take
+            plates = plate_images(out, frames, written)
+            sources = sorted({str(f["record"].get("plate", "")) for f in frames} - {""})
             paths.append(export(Path(out) / f"face_{kind}.usd",
-                                {"frames": frames, "triangles": tri, "camera": cam, "fps": fps or 24.0}))
+                                {"frames": frames, "triangles": tri, "camera": cam, "fps": fps or 24.0,
+                                 "plates": plates, "plate_sources": sources}))
     return paths
+
+
+def plate_images(out, frames, written=None):
+    """Write each frame's undistorted plate (its fit.npz's, sRGB JPEG) as out/plates/<frame>.jpg
+    for a USD take's card; ``written`` ({frame number: path}) skips those already written.
+    Returns {frame number: path relative to out}."""
+    from ..io.images import write_display_image
+    written = {} if written is None else written
+    rel = {}
+    for f in frames:
+        r = f["record"]
+        name = r.get("_name", "plate")
+        path = Path("plates") / f"{name}.jpg"
+        if f["frame"] not in written:
+            with np.load(Path(r["_dir"]) / "fit.npz", allow_pickle=False) as d:
+                if "plate" not in d:
+                    continue
+                write_display_image(Path(out) / path, linear_to_srgb(d["plate"]))
+            written[f["frame"]] = path
+        rel[f["frame"]] = written[f["frame"]].as_posix()
+    return rel
 
 
 def rig_frames(run, kind, single, model):
@@ -232,12 +258,14 @@ def write_rigs(out, kinds, model, fps=24.0, single=False, suffix=".usd"):
     return paths
 
 
-def write_sequence_outputs(out, kinds, fps=0.0):
-    """The sequence's files from its frames' records: curves.csv/json, the Live Link Face CSV, the
-    USD take and an overlay MP4 per kind, and the sequence page (index.html). Returns their paths."""
+def write_sequence_outputs(out, kinds, fps=0.0, exports=("csv", "usd")):
+    """The sequence's files from its frames' records: curves.csv/json, the Live Link Face CSV
+    ("csv" in ``exports``), the USD take ("usd"), an overlay MP4 per kind, and the sequence page
+    (index.html). Returns their paths."""
     from ..report.sequence import write_sequence_report
-    paths = list(write_curves_files(out, kinds)) + write_arkit_csv(out, kinds, fps or 24.0)
-    paths += write_usd_takes(out, kinds, fps or 24.0)
+    paths = list(write_curves_files(out, kinds))
+    paths += write_arkit_csv(out, kinds, fps or 24.0) if "csv" in exports else []
+    paths += write_usd_takes(out, kinds, fps or 24.0) if "usd" in exports else []
     paths += [p for k in kinds if (p := write_overlay_video(out, k, fps or 24.0)) is not None]
     paths.append(write_sequence_report(out))
     return paths

@@ -44,10 +44,11 @@ def model_kinds(kinds):
     return kinds
 
 
-def as_plate(plate, camera=None):
-    """A ``render.plates.Plate`` from a Plate or an image path (camera: see ``load_plate``)."""
+def as_plate(plate, camera=None, colorspace=None):
+    """A ``render.plates.Plate`` from a Plate or an image path (camera, colorspace: see
+    ``load_plate``)."""
     from ..render.plates import Plate, load_plate
-    return plate if isinstance(plate, Plate) else load_plate(plate, camera=camera)
+    return plate if isinstance(plate, Plate) else load_plate(plate, camera=camera, colorspace=colorspace)
 
 
 def plate_frames(source):

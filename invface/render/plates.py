@@ -1,4 +1,4 @@
-"""Film plates: an image in linear light (``io.images.read_image``), its camera and undistortion.
+"""Film plates: an image in linear light (``io.images.load_image``), its camera and undistortion.
 
 Inside invface images are linear-light float32 (H, W, 3). A plate may have a
 JSON camera file (``camera.Camera``); a plate with lens distortion is undistorted through
@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import CameraError, ImageError
 # the image readers and writers live in io.images; they stay importable from here, where
 # users' scripts found them
-from ..io.images import EXTS, SRGB_EXTS, linear_to_srgb, read_image, srgb_to_linear, write_image  # noqa: F401
+from ..io.images import EXTS, SRGB_EXTS, linear_to_srgb, load_image, read_image, srgb_to_linear, write_image  # noqa: F401
 from .camera import Camera
 
 
@@ -38,21 +38,25 @@ def undistort(image, camera: Camera):
 class Plate:
     """A plate ready to fit: linear image (H, W, 3), undistorted camera, optional mask, and the
     landmark detector's own ARKit scores when it found the plate's curves ({name: [0, 1]}:
-    MediaPipe's estimate, a peer's, not truth)."""
+    MediaPipe's estimate, a peer's, not truth) and the colour space its file was read in
+    (``io.colorspaces``; "" when the image came from memory)."""
 
     image: np.ndarray
     camera: Camera
     path: str = ""
     mask: np.ndarray | None = None
     peer_arkit: dict | None = None
+    colorspace: str = ""
 
 
-def load_plate(path, camera=None):
+def load_plate(path, camera=None, colorspace=None):
     """Read a plate and its camera (a Camera, a JSON path, or None: the sidecar
     ``<plate>.json`` if present, else the default front view at the plate's size),
-    check that they agree and undistort."""
+    check that they agree and undistort. colorspace: the file's colour space
+    (``io.colorspaces.resolve``; None: the format's default, ``io.colorspaces.default_for``)."""
     path = Path(path)
-    image, alpha = read_image(path)
+    read = load_image(path, colorspace)
+    image, alpha = read.rgb, read.alpha
     h, w = image.shape[:2]
     if camera is None:
         side = path.with_suffix(".json")
@@ -69,4 +73,4 @@ def load_plate(path, camera=None):
             raise ImageError(f"{path}: its alpha channel is transparent everywhere, so no pixel is left to fit: "
                              "save the plate with the face opaque, or without an alpha channel")
     image, camera = undistort(image, camera)
-    return Plate(image=image, camera=camera, path=str(path), mask=mask)
+    return Plate(image=image, camera=camera, path=str(path), mask=mask, colorspace=read.colorspace)

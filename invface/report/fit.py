@@ -287,7 +287,9 @@ def write_report(run, title=None, quick=False):
                        f"<figcaption>{html.escape(c)}</figcaption></figure>" for c, p in pics.items())
         notes = "".join(f"<p class=note>{html.escape(n)}</p>" for n in summary.get("notes", []))
         heat = summary.get("mesh_heat", {})
+        space = summary.get("plate_colorspace")
         status = f"status: {html.escape(str(summary.get('status', '')))}; " + (
+            f"plate read as {html.escape(space)}; " if space else "") + (
             f"3D heat map: {html.escape(heat.get('label', ''))}, scale 0-{heat.get('scale_mm', 0):.2f} mm, "
             f"median {heat.get('median_mm', 0):.3f} mm" if not quick else
             f"the 3D heat map and the charts: <code>invface report {html.escape(str(run))}</code>")
