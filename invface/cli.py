@@ -206,7 +206,7 @@ def cmd_calibrate(args):
     if args.auto_pose:
         if args.pose is not None:
             raise InvfaceError("give either --pose or --auto-pose, not both")
-        curves, source = find_curves(model, plate, args.curves)
+        curves, source = find_curves(model, plate, args.curves, crop=True)
         _calibrate(model, plate, args.output, args.max_iter, curves=curves, source=source, lam=args.lam,
                    lam_curves=args.curve_lambda)
     else:
@@ -347,10 +347,10 @@ def cmd_fit_plate(args):
                                    f"({numbers[0]}..{numbers[-1]})")
             pos = numbers.index(args.neutral_frame)
             frame = next(clip.frames(pos, pos + 1))
-            curves, source = find_curves(model, frame.plate, args.curves, face=args.face)
+            curves, source = find_curves(model, frame.plate, args.curves, face=args.face, crop=len(clip) == 1)
         elif len(clip) == 1:
             frame = next(clip.frames())
-            curves, source = find_curves(model, frame.plate, args.curves, face=args.face)
+            curves, source = find_curves(model, frame.plate, args.curves, face=args.face, crop=len(clip) == 1)
         else:
             print("picking the most neutral-looking frame to calibrate on", flush=True)
             frame, curves, source, pose = pick_neutral(model, clip, lam=args.curve_lambda, progress=_events,

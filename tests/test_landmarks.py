@@ -186,3 +186,36 @@ def test_irises_and_peer_scores_on_renders_of_a_known_gaze(small_expressive_mode
     look, rest, shut = (seen[k][1] for k in ("look", "rest", "shut"))
     assert look["eyeLookOutLeft"] > rest["eyeLookOutLeft"] + 0.2 and look["eyeLookInRight"] > rest["eyeLookInRight"] + 0.2
     assert shut["eyeSquintLeft"] + shut["eyeBlinkLeft"] > shut["eyeSquintRight"] + shut["eyeBlinkRight"] + 0.2
+
+
+@needs_detector
+def test_a_90px_face_in_a_6000px_frame_is_found_and_brought_to_a_working_crop(small_model):
+    """A 90 px face at 1/65 of a 6000 px frame's width: a proposal and the landmarker on a crop
+    around it find it, its points land where the photo's own detection puts them, and ``find_curves``
+    brings the plate to a working size around the face (``working_plate``): the crop holds
+    every curve, its camera projects as the whole plate's does, and the curves mapped back
+    through ``crop`` are the detector's on the whole frame."""
+    from invface.io.images import srgb_to_linear
+    from invface.pipeline.plates import WORKING_SIZE, find_curves
+    from invface.render.camera import Camera
+    from invface.render.plates import Plate
+    scale, at = 1.0, (4100, 1900)
+    frame, a = _wide_frame(scale, at=at, size=(6000, 3000))
+    own = landmarks.detect_landmarks(a, "astronaut")
+    expect = np.stack([at[0] + (own[:, 0] + 0.5) * scale - 0.5, at[1] + (own[:, 1] + 0.5) * scale - 0.5], 1)
+    width = np.ptp(expect[:, 0])
+    assert width < 0.02 * frame.shape[1]
+    plate = Plate(image=srgb_to_linear(frame / 255.0), camera=Camera.front_view(6000, 3000), path="wide.png")
+    whole = plate.camera
+    curves, _ = find_curves(small_model, plate, crop=True)
+    crop = plate.crop
+    assert crop["size"] == [6000, 3000] and max(plate.camera.size) <= WORKING_SIZE
+    assert plate.image.shape[:2] == plate.camera.size[::-1] and plate.mask.shape == plate.image.shape[:2]
+    pts = np.concatenate(list(curves.values()))
+    assert pts.min() >= 0 and np.all(pts.max(0) < plate.camera.size)
+    back = (pts + 0.5) / crop["scale"] - 0.5 + crop["origin"]
+    mine = np.concatenate(list(landmarks.curves_from_landmarks(expect).values()))
+    assert np.median(np.linalg.norm(back - mine, axis=1)) < 0.03 * width
+    X = np.random.default_rng(0).normal([0, 0, 0.05], 0.05, (50, 3))
+    np.testing.assert_allclose(plate.camera.project(X)[0],
+                               (whole.project(X)[0] - crop["origin"] + 0.5) * crop["scale"] - 0.5, atol=1e-9)

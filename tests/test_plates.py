@@ -127,3 +127,36 @@ def test_checkerboard_calibration_recovers_intrinsics(tmp_path):
     np.testing.assert_allclose(cam.K, K, atol=3.0)
     with pytest.raises(CameraError, match="at least 3 views"):
         calibrate(paths[:2], inner=inner, square=sq)
+
+
+def test_a_large_plate_is_fitted_at_a_working_size(tmp_path, small_model):
+    """``find_curves`` brings a plate longer than WORKING_SIZE to it: a sequence's frame (no
+    crop) is only reduced, a single plate is cropped to its face first; the camera follows
+    (every pixel keeps its ray), and a curves file in the file's pixels lands on the crop."""
+    import json
+
+    from invface.pipeline.plates import WORKING_SIZE, find_curves
+    from invface.render.plates import Plate
+    W, H = 3000, 2000
+    cam = Camera.front_view(W, H)
+    X = np.random.default_rng(1).normal([0, 0, 0.05], 0.03, (200, 3))
+    uv = cam.project(X)[0]
+    names = ["jaw_line", "nose_bridge"]
+    curves = {names[0]: uv[:100], names[1]: uv[100:]}
+    for crop in (False, True):
+        plate = Plate(image=np.zeros((H, W, 3), np.float32), camera=cam, path="")
+        found, _ = find_curves(small_model, plate, dict(curves), crop=crop)
+        c = plate.crop
+        assert c["size"] == [W, H] and max(plate.camera.size) <= WORKING_SIZE
+        assert plate.image.shape[:2] == plate.camera.size[::-1]
+        if not crop:
+            assert c["origin"] == [0, 0] and plate.camera.size == (1024, 683)
+        else:
+            assert 0 < c["origin"][0] and max(plate.camera.size) < W / 2       # around the points only
+        np.testing.assert_allclose(plate.camera.project(X)[0], np.concatenate([found[n] for n in names]), atol=1e-9)
+    # a curves file (in the file's pixels) read again on the cropped plate lands on the crop
+    path = tmp_path / "c.curves.json"
+    path.write_text(json.dumps({"image_size": [W, H], "curves": {n: v.tolist() for n, v in curves.items()}}))
+    again, _ = find_curves(small_model, plate, path)
+    for n in names:
+        np.testing.assert_allclose(again[n], found[n], atol=1e-9)

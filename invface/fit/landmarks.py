@@ -143,22 +143,33 @@ PROPOSAL_FRAME = 1280   # px: the cascades look at the frame scaled to at most t
 def face_proposals(image_srgb):
     """Face boxes (x, y, width, height) px in an sRGB image, likeliest first: OpenCV's bundled
     frontal-face Haar cascades over the frame (scaled to at most PROPOSAL_FRAME px, down to 16 px
-    faces there), then tiles: windows of a half, a third and a quarter of the frame's shorter
-    side, overlapping by half, each offered as a box a third of its size at its centre (so its
-    crop is the tile). MediaPipe's detector sees the whole frame at 128 px: a small face in a
-    wide frame needs a crop around such a box."""
+    faces there; a larger frame also at twice and four times that size, in tiles of
+    PROPOSAL_FRAME px overlapping by half, so that a 90 px face in an 8000 px frame is 29 and
+    58 px there), then tiles:
+    windows of a half, a third and a quarter of the frame's shorter side, overlapping by half,
+    each offered as a box a third of its size at its centre (so its crop is the tile).
+    MediaPipe's detector sees the whole frame at 128 px: a small face in a wide frame needs a
+    crop around such a box."""
     import cv2
     img = _uint8(image_srgb)
-    grey = cv2.equalizeHist(cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_RGB2GRAY))
-    k = min(1.0, PROPOSAL_FRAME / max(grey.shape))
-    if k < 1:
-        grey = cv2.resize(grey, (round(grey.shape[1] * k), round(grey.shape[0] * k)), interpolation=cv2.INTER_AREA)
+    full = cv2.equalizeHist(cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_RGB2GRAY))
+    cascades = [cv2.CascadeClassifier(cv2.data.haarcascades + name)
+                for name in ("haarcascade_frontalface_alt2.xml", "haarcascade_frontalface_default.xml")]
     boxes = []
-    for name in ("haarcascade_frontalface_alt2.xml", "haarcascade_frontalface_default.xml"):
-        cascade = cv2.CascadeClassifier(cv2.data.haarcascades + name)
-        found = cascade.detectMultiScale(grey, scaleFactor=1.1, minNeighbors=3, minSize=(16, 16))
-        boxes += sorted((tuple(int(round(v / k)) for v in b) for b in (found if len(found) else [])),
-                        key=lambda b: -b[2] * b[3])
+    for size in (PROPOSAL_FRAME, 2 * PROPOSAL_FRAME, 4 * PROPOSAL_FRAME):
+        k = min(1.0, size / max(full.shape))
+        grey = full if k == 1 else cv2.resize(full, (round(full.shape[1] * k), round(full.shape[0] * k)),
+                                              interpolation=cv2.INTER_AREA)
+        span = PROPOSAL_FRAME if size > PROPOSAL_FRAME else max(grey.shape)      # the tiles' side
+        tiles = [(x, y) for y in range(0, max(grey.shape[0] - span, 0) + span // 2, span // 2)
+                 for x in range(0, max(grey.shape[1] - span, 0) + span // 2, span // 2)]
+        for cascade in cascades:
+            found = [b + np.array([x, y, 0, 0]) for x, y in tiles
+                     for b in cascade.detectMultiScale(grey[y:y + span, x:x + span], scaleFactor=1.1,
+                                                       minNeighbors=3, minSize=(16, 16))]
+            boxes += sorted((tuple(int(round(v / k)) for v in b) for b in found), key=lambda b: -b[2] * b[3])
+        if k == 1:
+            break
     kept = []
     for b in boxes:
         if all(_iou(b, q) <= 0.3 for q in kept):

@@ -201,6 +201,8 @@ def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=
     summary = dict(fit.summary(), plate=str(plate.path), **(extra or {}))
     if getattr(plate, "colorspace", ""):
         summary["plate_colorspace"] = plate.colorspace
+    if getattr(plate, "crop", None):
+        summary["plate_crop"] = plate.crop
     eyes = Eyes(model)
     names = sorted(n for n in curves if n in model.curves or (len(eyes.sides) == 2 and n in IRIS_CURVES))
     arrays = {"plate": plate.image.astype(np.float32), "render": fit.render.astype(np.float32),

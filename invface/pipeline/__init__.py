@@ -42,7 +42,7 @@ def calibrate(plate, model=None, pose="auto", curves=None, camera=None, lam=None
     if isinstance(pose, str):
         if pose != "auto":
             raise ConfigError(f"pose must be 'auto' or (rotation, translation), not {pose!r}")
-        found, source = find_curves(model, plate, curves)
+        found, source = find_curves(model, plate, curves, crop=True)
         return auto_calibrate(model, plate, found, source, lam=lam, max_iter=max_iter, progress=progress)
     rotation, translation = pose
     return calibrate_plate(model, plate, rotation, translation, lam=EQ14_LAMBDA if lam is None else lam,
@@ -61,7 +61,7 @@ def fit_plate(plate, calibration=None, model=None, kinds=("blendshape",), curves
     from ..fit.calibrate import Calibration
     model = load_model(model)
     plate = as_plate(plate, camera, colorspace)
-    found, source = find_curves(model, plate, curves)
+    found, source = find_curves(model, plate, curves, crop=True)
     if calibration is None:
         calibration = auto_calibrate(model, plate, found, source, progress=progress)
     elif isinstance(calibration, (str, Path)):

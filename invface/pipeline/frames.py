@@ -96,7 +96,7 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
                     on_kind(ff, kind)
             try:
                 ff = fit_frame(model, frame.plate, calibration, curves, kinds=todo, starts=starts,
-                               progress=progress, on_kind=finished, detector=detector, **options)
+                               progress=progress, on_kind=finished, detector=detector, crop=single, **options)
             except InvfaceError as e:
                 if single:
                     raise

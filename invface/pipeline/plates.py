@@ -71,7 +71,40 @@ def peer_comparison(fitted, peer):
             "mean_abs_difference": round(float(np.mean(np.abs(list(diff.values())))), 6) if diff else None}
 
 
-def find_curves(model, plate, curves=None, detector=None, face=0):
+WORKING_SIZE = 1024      # px: the longest side a plate is fitted at (``working_plate``)
+
+
+def working_plate(plate, curves, crop=False):
+    """Bring a plate longer than WORKING_SIZE px to a working size, in place: with ``crop``
+    (a single plate), first to the face (a square 1.6 times the curves' extent, inside the
+    plate), then, if still larger, down to WORKING_SIZE (``render.plates.crop_plate``: the
+    camera follows, so the fit is the same 3D one). Without ``crop`` (a sequence, whose frames
+    must share one camera) the whole plate is only reduced. Returns the curves {name: (n, 2)}
+    in the working plate's pixels; ``plate.crop`` says how they map back."""
+    from ..render.plates import crop_plate, to_crop_pixels
+    w, h = plate.camera.size
+    if plate.crop is not None or max(w, h) <= WORKING_SIZE:
+        return curves
+    x0, y0, x1, y1 = 0, 0, w, h
+    if crop:
+        pts = np.concatenate([np.asarray(v, float) for v in curves.values()])
+        centre, half = (pts.min(0) + pts.max(0)) / 2, max(0.8 * float((pts.max(0) - pts.min(0)).max()), 32.0)
+        x0, y0 = (max(int(np.floor(c - half)), 0) for c in centre)
+        x1, y1 = min(int(np.ceil(centre[0] + half)), w), min(int(np.ceil(centre[1] + half)), h)
+    scale = min(1.0, WORKING_SIZE / max(x1 - x0, y1 - y0))
+    plate.__dict__.update(vars(crop_plate(plate, (x0, y0, x1, y1), scale)))
+    return {k: to_crop_pixels(v, plate.crop) for k, v in curves.items()}
+
+
+def describe_crop(crop):
+    """One line for the report: where a plate's working pixels come from."""
+    (x0, y0), (sx, _), (w, h) = crop["origin"], crop["scale"], crop["size"]
+    return (f"The plate ({w}x{h} px) is fitted at a working size: from pixel ({x0}, {y0}), scaled by {sx:.3f}; "
+            "the camera is moved and scaled with it, and curve errors are in the working pixels "
+            f"(x {1 / sx:.2f} for the plate's own)")
+
+
+def find_curves(model, plate, curves=None, detector=None, face=0, crop=False):
     """The plate's curves and where they came from: ``curves`` ({name: (n, 2) px}, or a curve
     file), else PLATE.curves.json beside the plate, else the landmark detector (whose face
     oval then becomes the plate's mask when it has none; ``detector(image_srgb, name)`` ->
@@ -81,10 +114,15 @@ def find_curves(model, plate, curves=None, detector=None, face=0):
     fits, 0 the first found, the whole frame first, then crops around face proposals, largest
     first: ``fit.landmarks.detect_landmarks``).
     Curves mostly outside the plate are an InvfaceError
-    (``fit.curves.check_curves``). Returns ({name: (n, 2) px}, source)."""
+    (``fit.curves.check_curves``). A plate longer than WORKING_SIZE is then brought to its
+    working size in place (``working_plate``, to the face with ``crop``); curves given as a
+    dict are in the pixels of the plate as passed, curves read from a file in the file's. Returns ({name: (n, 2) px in the plate's
+    working pixels}, source)."""
     from ..fit.curves import check_curves, read_curves
     from ..fit.landmarks import curves_from_landmarks, detect_face, face_mask
     from ..io.images import linear_to_srgb
+    from ..render.plates import to_crop_pixels
+    size = tuple(plate.crop["size"]) if plate.crop else plate.camera.size
     if isinstance(curves, dict):
         found, source = {k: np.asarray(v, float) for k, v in curves.items()}, "given"
     else:
@@ -94,7 +132,7 @@ def find_curves(model, plate, curves=None, detector=None, face=0):
             if side.is_file():
                 curves = side
         if curves is not None:
-            found, source = read_curves(curves, model, image_size=plate.camera.size), str(curves)
+            found, source = read_curves(curves, model, image_size=size), str(curves)
         else:
             image, name = linear_to_srgb(plate.image), str(path or "plate")
             if detector:
@@ -104,8 +142,10 @@ def find_curves(model, plate, curves=None, detector=None, face=0):
             if plate.mask is None:
                 plate.mask = face_mask(points, *plate.image.shape[:2])
             found, source = curves_from_landmarks(points), DETECTOR
+    if plate.crop and source not in (DETECTOR, "given"):    # a file's curves on a plate already at its working size
+        found = {k: to_crop_pixels(v, plate.crop) for k, v in found.items()}
     check_curves(found, plate.camera.size, source)          # curves off the plate: an error
-    return found, source
+    return working_plate(plate, found, crop), source
 
 
 @dataclass
@@ -366,13 +406,13 @@ class FrameFit:
 def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), starts=None, iterations=25,
               shading=True, lam_curves=None, solver="dogleg", notes=(), title=None, progress=None,
               on_kind=None, source=None, camera=None, detector=None, temporal=0.0, temporal_shading=EQ16_TEMPORAL,
-              face=0):
+              face=0, crop=False):
     """Fit one plate with each model kind (paper 000, Eq. 15 then 16). plate: a Plate or a path;
     calibration: a Calibration or PlateCalibration of this model and camera set-up; curves:
     see ``find_curves`` (source: where given curves came from, for the report); starts: {kind: PlateFit} of the previous frame (warm start);
     lam_curves: lambda_1 of Eq. 15 (default: scaled with the face, ``curve_lambda``);
     on_kind(frame, kind): called as each kind finishes (to write it at once); camera: for a
-    plate path (see ``render.plates.load_plate``); detector, face: see ``find_curves``; temporal: the
+    plate path (see ``render.plates.load_plate``); detector, face, crop: see ``find_curves``; temporal: the
     weight of the temporal term to the ``starts`` (``fit.curves.fit_curves``; px^2 per
     scale unit^2, scaled here with the face like lambda_1); temporal_shading: the shading
     stages' share of it (``fit.plate.fit_plate``). A kind whose simulation cannot reach an
@@ -382,8 +422,10 @@ def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), sta
     from ..fit.plate import fit_plate
     plate = as_plate(plate, camera)
     checked, calibration = calibration, getattr(calibration, "calibration", calibration)
-    curves, found = find_curves(model, plate, curves, detector, face)
+    curves, found = find_curves(model, plate, curves, detector, face, crop)
     source = source or found
+    if plate.crop:
+        notes = [*notes, describe_crop(plate.crop)]
     lam = curve_lambda(curves, lam_curves)
     frame = FrameFit(model=model, plate=plate, curves=curves, source=source, notes=list(notes), title=title,
                      options={"curve_lambda": lam, "solver": solver, "temporal": temporal,
