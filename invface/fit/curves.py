@@ -234,7 +234,12 @@ class CurveObjective:
         # each eye's corners: the model's upper lid's end vertices, the plate's lid's end points' midpoint
         self.corners = {e: (np.asarray(model.curves[lids[e]])[[0, -1]],
                             np.asarray(curves[lids[e]], float)[[0, -1]].mean(0)) for e in self.irises}
-        self.relief = gaze_relief(self.vec) if self.irises else None      # the irises fix the gaze
+        # the irises fix the gaze, and an eye's two lid curves its blink (Eq. 15 only: ``gaze``
+        # is the relief without the lids, for Eq. 16, whose image term does not see the eyes)
+        lids = [side for s, side in (("L", "Left"), ("R", "Right"))
+                if f"eye_{s}_upper" in self.curves and f"eye_{s}_lower" in self.curves]
+        self.relief = gaze_relief(self.vec, bool(self.irises), lids) if self.irises or lids else None
+        self.gaze = gaze_relief(self.vec) if self.irises else None
 
     def residuals(self, xr):
         """{name: (n, 2) projected-minus-closest px} at posed vertices xr (V, 3)."""

@@ -18,11 +18,24 @@ SPARSITY = 0.4
 # pixels an iris moves, so the fitted gaze would stop short of the irises.
 GAZE_PRIOR = 0.02
 
+# The lids' controls' share (eyeBlink, eyeSquint, eyeWide) where the plate has both lids of that
+# eye: a lid's curves are few points that travel little (a shut eye moves them a tenth of what a
+# smile moves the lips), so at the full lambda_1 the prior outweighs a whole blink and a shut eye
+# is fitted half open.
+LID_PRIOR = 0.1
+LID_CONTROLS = ("eyeBlink",)
 
-def gaze_relief(vec):
-    """(P,) factors on the controls' prior: GAZE_PRIOR on the eyeLook weights, 1 elsewhere."""
+
+def gaze_relief(vec, irises=True, lids=()):
+    """(P,) factors on the controls' prior: GAZE_PRIOR on the eyeLook weights (with
+    ``irises``), LID_PRIOR on the lid controls of the sides in ``lids`` ("Left", "Right": the
+    actor's own, whose both lid curves the plate has), 1 elsewhere."""
     f = np.ones(vec.P)
-    f[[i for i, n in enumerate(vec.blendshape_names) if n.startswith("eyeLook")]] = GAZE_PRIOR
+    names = vec.blendshape_names
+    if irises:
+        f[[i for i, n in enumerate(names) if n.startswith("eyeLook")]] = GAZE_PRIOR
+    f[[i for i, n in enumerate(names) if n.startswith(LID_CONTROLS) and n.endswith(tuple(lids))
+       and lids]] = LID_PRIOR
     return f
 
 

@@ -573,7 +573,7 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
                 raise
             log(ne.cost)
             return _ScaledEquations(ne, s)
-        relief = obj.curves.relief if obj.curves is not None else None
+        relief = obj.curves.gaze if obj.curves is not None else None
         res = dogleg(with_linear_term(fun, sparsity_slopes(vec, lam2, relief=relief) * s), z0 / s, lo / s, hi / s,
                      max_iter=max_iter, radius=radius, ftol=ftol, min_radius=1e-2, adapt_curvature=True)
         for h, step in zip(history[1:], res.history):       # the dogleg's verdict on each trial
