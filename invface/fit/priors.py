@@ -18,24 +18,24 @@ SPARSITY = 0.4
 # pixels an iris moves, so the fitted gaze would stop short of the irises.
 GAZE_PRIOR = 0.02
 
-# The lids' controls' share (eyeBlink, eyeSquint, eyeWide) where the plate has both lids of that
-# eye: a lid's curves are few points that travel little (a shut eye moves them a tenth of what a
-# smile moves the lips), so at the full lambda_1 the prior outweighs a whole blink and a shut eye
-# is fitted half open.
+# The blink's share of Eq. 15's prior where the plate has both lids of that eye: a lid's curves
+# are few points that travel little, so at the full lambda_1 the prior outweighs a whole blink
+# and the curve stage fits a shut eye half open. eyeSquint and eyeWide keep the full prior: with
+# theirs relieved too the fit opened and squinted the same eye at once on real photos.
 LID_PRIOR = 0.1
 LID_CONTROLS = ("eyeBlink",)
 
 
 def gaze_relief(vec, irises=True, lids=()):
     """(P,) factors on the controls' prior: GAZE_PRIOR on the eyeLook weights (with
-    ``irises``), LID_PRIOR on the lid controls of the sides in ``lids`` ("Left", "Right": the
+    ``irises``), LID_PRIOR on the LID_CONTROLS of the sides in ``lids`` ("Left", "Right": the
     actor's own, whose both lid curves the plate has), 1 elsewhere."""
     f = np.ones(vec.P)
     names = vec.blendshape_names
     if irises:
         f[[i for i, n in enumerate(names) if n.startswith("eyeLook")]] = GAZE_PRIOR
-    f[[i for i, n in enumerate(names) if n.startswith(LID_CONTROLS) and n.endswith(tuple(lids))
-       and lids]] = LID_PRIOR
+    if lids:
+        f[[i for i, n in enumerate(names) if n.startswith(LID_CONTROLS) and n.endswith(tuple(lids))]] = LID_PRIOR
     return f
 
 
