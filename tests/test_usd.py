@@ -106,7 +106,8 @@ def test_a_take_reads_back_in_usd_and_its_camera_projects_as_ours(tmp_path, smal
     assert view_depth(card).min() > view_depth(np.array(pts.Get(10))).max()
     assert gf.clippingRange.max > view_depth(card).max()
     texture = stage.GetPrimAtPath("/Capture/PlateMaterial/Texture").GetAttribute("inputs:file")
-    assert [texture.Get(t).path for t in (10, 12)] == ["plates/f0.jpg", "plates/f2.jpg"]
+    assert [texture.Get(t).path for t in (10, 12)] == ["./plates/f0.jpg", "./plates/f2.jpg"]
+    assert texture.Get(12).resolvedPath == str(run / "plates" / "f2.jpg")
     from invface.io.images import load_image
     assert load_image(run / "plates" / "f2.jpg").rgb.mean() == pytest.approx(0.3, abs=0.01)
 

@@ -191,8 +191,12 @@ def _plate_card(stage, camera, plates, sources, depth):
     texture.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
     texture.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
     file = texture.CreateInput("file", Sdf.ValueTypeNames.Asset)
-    for frame, image in sorted(plates.items()):
-        file.Set(Sdf.AssetPath(str(image)), float(frame))
+    for i, (frame, image) in enumerate(sorted(plates.items())):
+        # "./": anchored to this layer's folder (a bare relative path is a search path in USD)
+        asset = Sdf.AssetPath(image if image.startswith(("./", "../", "/")) else "./" + image)
+        if i == 0:
+            file.Set(asset)              # the default, for readers that take no time samples
+        file.Set(asset, float(frame))
     rgb = texture.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
     surface.CreateInput("emissiveColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(rgb)
     material.CreateSurfaceOutput().ConnectToSource(surface.ConnectableAPI(), "surface")
