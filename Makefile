@@ -5,7 +5,7 @@ PY ?= python3
 
 demo:
 	@scripts/install.sh
-	$(PY) -m invface.cli demo
+	$(PY) -m invface.cli demo --overwrite
 
 test:
 	@scripts/install.sh test

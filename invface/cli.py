@@ -66,6 +66,8 @@ class _FitBars:
 
 def cmd_build_model(args):
     from .pipeline import ModelBuild, build_model, load_model
+    _fresh_output(args.output, args.overwrite)
+    _fresh_output(args.preview, args.overwrite, "--preview", folder=True)
     if args.neutral:
         if not args.output:
             raise InvfaceError("build-model --neutral needs -o/--output for the new model (.npz)")
@@ -95,6 +97,28 @@ def cmd_build_model(args):
         paths = build.save(None, preview=args.preview)
         print(f"previews: {len(paths)} images in {args.preview} (contact sheet: {paths[-1]})")
     return 0
+
+
+def _fresh_output(path, overwrite, option="-o", folder=False):
+    """One rule for every verb's output, checked before any work: an existing output (a file,
+    or a folder that holds anything) is refused unless --overwrite, and so is one whose folder
+    cannot be made or written (a file in the way, no write permission)."""
+    if path is None:
+        return
+    p = Path(path)
+    if (p.is_dir() and any(p.iterdir())) if folder else p.exists():
+        if not overwrite:
+            raise InvfaceError(f"{option} {p}: already exists" + (" and is not empty" if folder else "")
+                               + f"; pass --overwrite to replace it, or give another {option}")
+    elif not folder and p.is_dir():
+        raise InvfaceError(f"{option} {p}: is a folder; give a file name")
+    for q in [p if folder else p.parent, *(p if folder else p.parent).parents]:
+        if q.exists():
+            if not q.is_dir():
+                raise InvfaceError(f"{option} {p}: a file stands where a folder is needed ({q})")
+            if not os.access(q, os.W_OK):
+                raise InvfaceError(f"{option} {p}: the folder {q} is not writable")
+            break
 
 
 def _load_model(path, resolution):
@@ -141,6 +165,8 @@ def cmd_simulate(args):
         if Path(args.output).suffix.lower() not in MESH_EXTS:
             raise InvfaceError(f"-o {args.output}: the simulated surface is written as a mesh: give a file ending "
                                + ", ".join(MESH_EXTS))
+    _fresh_output(args.output, args.overwrite)
+    _fresh_output(args.preview, args.overwrite, "--preview")
     if weights and acts:
         raise InvfaceError("give muscle activations (--activations/--set) or blendshape weights "
                            "(--weight), not both: with weights the activations follow from the tracks")
@@ -201,6 +227,7 @@ def _calibrate(model, plate, out, max_iter, pose=None, curves=None, source="", l
 def cmd_calibrate(args):
     """Lighting and albedo calibration (Eq. 14) on a neutral plate."""
     from .pipeline import as_plate, find_curves
+    _fresh_output(args.output, args.overwrite)
     model = _load_model(args.model, args.resolution)
     plate = as_plate(args.plate, args.camera, args.colorspace)
     if args.auto_pose:
@@ -217,6 +244,7 @@ def cmd_calibrate(args):
 def cmd_camera_calibrate(args):
     """Camera intrinsics and distortion from checkerboard photographs."""
     from .render.checkerboard import calibrate
+    _fresh_output(args.output, args.overwrite)
     try:
         inner = tuple(int(v) for v in args.board.lower().split("x"))
         assert len(inner) == 2 and min(inner) >= 2
@@ -235,6 +263,7 @@ def cmd_camera_calibrate(args):
 def cmd_fit_scan(args):
     """Fit controls and pose to a 3D scan (Eq. 13); write fit.json and the fitted mesh."""
     from .pipeline import fit_scan
+    _fresh_output(args.output, args.overwrite, folder=True)
     model = _load_model(args.model, args.resolution)
     bar = _bar(f"fit {args.model_kind} model to scan")
     try:
@@ -422,6 +451,7 @@ def cmd_demo(args):
     """Build the template, write previews and expression sheets, then calibrate and fit a plate."""
     from .pipeline import build_model
     out = Path(args.output)
+    _fresh_output(out, args.overwrite, folder=True)
     print("invface demo: building the built-in anatomical head", flush=True)
     build = build_model(progress=_events)
     model = build.model
@@ -548,6 +578,7 @@ def build_parser():
     b.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor (1 = ~35k tets)")
     b.add_argument("--force", action="store_true", help="regenerate instead of using the cache")
     b.add_argument("-o", "--output", help="write the bundle here (.npz)")
+    b.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     b.add_argument("--preview", metavar="DIR", help="write preview images into DIR")
     b.set_defaults(func=cmd_build_model)
     s = sub.add_parser("simulate", help="pose the model by muscle activations or blendshape-driven tracks "
@@ -560,6 +591,7 @@ def build_parser():
                    help="blendshape weight driving the muscle tracks (repeatable; paper 000 Sec. 6)")
     s.add_argument("--jaw", type=FINITE, help="jaw opening angle (rad) about the hinge")
     s.add_argument("-o", "--output", help="write the posed skin mesh (OBJ/PLY)")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     s.add_argument("--preview", help="write a PNG: neutral (top) and posed (bottom), front and 3/4")
     s.set_defaults(func=cmd_simulate)
     c = sub.add_parser("calibrate", help="solve SH lighting and per-vertex albedo on a neutral plate (Eq. 14)")
@@ -580,6 +612,7 @@ def build_parser():
                                              "2500; with --auto-pose scaled with the face's size like lambda_1)")
     c.add_argument("--max-iter", type=COUNT, default=30, help="Gauss-Newton iterations at most")
     c.add_argument("-o", "--output", default="calib.npz", help="calibration file to write (.npz)")
+    c.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     c.set_defaults(func=cmd_calibrate)
     fs = sub.add_parser("fit-scan", help="fit controls and rigid pose to a 3D scan (Eq. 13)")
     fs.add_argument("scan", help="scan mesh (OBJ/PLY, model frame: +Y up, face along +Z)")
@@ -593,6 +626,7 @@ def build_parser():
     fs.add_argument("--lam", type=NON_NEGATIVE, default=EQ13_LAMBDA, help="weight regulariser lambda of Eq. 13 (paper: 1e-6)")
     fs.add_argument("--max-iter", type=COUNT, default=50, help="dogleg iterations at most (per round)")
     fs.add_argument("-o", "--output", default="reports/fit-scan", help="output folder")
+    fs.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     fs.set_defaults(func=cmd_fit_scan)
     fp = sub.add_parser("fit-plate", help="fit controls and pose to a film plate: curves (Eq. 15), then "
                                           "shape from shading (Eq. 16); a folder is a sequence")
@@ -679,9 +713,11 @@ def build_parser():
     cc.add_argument("--square", type=POSITIVE, default=0.025, help="square size in metres")
     cc.add_argument("--no-distortion", action="store_true", help="fit K only")
     cc.add_argument("-o", "--output", default="camera.json", help="JSON camera file to write")
+    cc.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     cc.set_defaults(func=cmd_camera_calibrate)
     d = sub.add_parser("demo", help="run the main job on the built-in model")
     d.add_argument("-o", "--out", "--output", dest="output", default="reports/demo", help="output folder")
+    d.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     d.set_defaults(func=cmd_demo)
     for words, example in EXAMPLES.items():
         parser = sub.choices[words[0]]

@@ -77,6 +77,19 @@ CASES = {
     "export of a folder with no fit": ({}, ["export", "out"], "out"),
     "export in an unknown format": ({"out/blendshape/fit.json": lambda p: p.write_text("{}")},
                                     ["export", "out", "--format", "fbx"], "fbx"),
+    # an existing output is refused unless --overwrite, the same way by every verb, before any work
+    "calibrate onto an existing calibration": ({"plate.png": _plate, "out/calib.npz": lambda p: p.write_bytes(b"x")},
+                                               ["calibrate", "plate.png", "-o", "out/calib.npz"],
+                                               "out/calib.npz: already exists; pass --overwrite"),
+    "fit-scan into a folder that holds a fit": ({"scan.obj": _mesh, "out/fit.json": lambda p: p.write_text("{}")},
+                                                ["fit-scan", "scan.obj", "-o", "out"], "--overwrite"),
+    "camera calibrate onto a camera file": ({"board.png": _plate, "out/cam.json": lambda p: p.write_text("{}")},
+                                            ["camera", "calibrate", "board.png", "--board", "9x6", "-o",
+                                             "out/cam.json"], "out/cam.json: already exists"),
+    "build-model under a file": ({"out/afile": lambda p: p.write_text("")},
+                                 ["build-model", "--template", "-o", "out/afile/x.npz"], "a file stands where a folder"),
+    "simulate onto an existing mesh": ({"out/x.obj": lambda p: p.write_text("")},
+                                       ["simulate", "--weight", "mouthSmileLeft=1", "-o", "out/x.obj"], "out/x.obj"),
 }
 
 

@@ -58,7 +58,7 @@ def test_calibrate_command_writes_calibration_and_comparison(small_expressive_mo
     # a camera of another size is refused in one line, naming the plate
     Camera.front_view(200, 120).save(tmp_path / "other.json")
     r = run("calibrate", str(tmp_path / "neutral.png"), "--camera", str(tmp_path / "other.json"),
-            "--resolution", str(SMALL_RESOLUTION), "-o", str(out))
+            "--resolution", str(SMALL_RESOLUTION), "-o", str(out), "--overwrite")
     assert r.returncode == 2 and "neutral.png: plate is 160x120" in r.stderr and "Traceback" not in r.stderr
 
 
@@ -86,7 +86,7 @@ def test_calibrate_auto_pose_finds_the_pose_from_curves(small_expressive_model, 
     assert "pose from 11 curves (" in r.stdout
     cal = Calibration.load(out, vertex_count=len(m.neutral))
     assert np.abs(cal.rotation - rot).max() < 0.01 and np.abs(cal.translation - tr).max() < 0.002
-    r = run("calibrate", str(tmp_path / "p.png"), "--auto-pose", "--pose", *["0"] * 6, *args)
+    r = run("calibrate", str(tmp_path / "p.png"), "--auto-pose", "--pose", *["0"] * 6, *args, "--overwrite")
     assert r.returncode == 2 and "--auto-pose" in r.stderr and "Traceback" not in r.stderr
 
 
