@@ -323,6 +323,26 @@ def test_video_writer_is_atomic(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.mp4"]
 
 
+def test_videos_are_h264_that_browsers_play(tmp_path):
+    """With imageio-ffmpeg (a dependency) the writer encodes H.264 (read back by OpenCV as
+    such), an odd-sized frame padded to even sides, its pixels kept."""
+    import cv2
+    pytest.importorskip("imageio_ffmpeg")
+    from invface.io.video import VideoWriter
+    frame = np.zeros((61, 81, 3), np.uint8)
+    frame[20:40, 30:50] = (250, 120, 30)
+    with VideoWriter(tmp_path / "v.mp4", fps=24) as v:
+        for _ in range(5):
+            v.write(frame)
+    assert v.codec == "h264"
+    cap = cv2.VideoCapture(str(tmp_path / "v.mp4"))
+    fourcc = int(cap.get(cv2.CAP_PROP_FOURCC)).to_bytes(4, "little").decode().lower()
+    ok, got = cap.read()
+    cap.release()
+    assert fourcc in ("h264", "avc1") and ok and got.shape == (62, 82, 3)
+    assert np.abs(got[30, 40, ::-1].astype(int) - (250, 120, 30)).max() < 12
+
+
 def test_exporter_table(tmp_path):
     from invface.errors import ConfigError
     from invface.io import export, exporter

@@ -101,10 +101,17 @@ def write_sequence_report(run, title=None):
             f'alt="{html.escape(f)}: plate | render | wipe">'
             f"</a><figcaption>{html.escape(f)}</figcaption></figure>"
             for f in have if (run / f / kind / "wipe.png").is_file())
+        video = run / f"overlay_{kind}.mp4"
+        if video.is_file():          # H.264 (io.video): the page plays it
+            pics = (f'<figure><video controls muted loop src="{html.escape(video.name)}" style="max-width:720px">'
+                    f'</video><figcaption>{html.escape(video.name)}: plate | render | wipe, frame by frame'
+                    "</figcaption></figure>") + pics
         sections.append(f"<h2>{html.escape(kind)} model</h2><div class=grid>{pics}</div>"
                         f"<table><tr>{head}</tr>{rows}</table><div class=grid>{strip}</div>")
     files = ", ".join(f'<a href="{html.escape(p.name)}">{html.escape(p.name)}</a>'
-                      for p in [run / "curves.csv", run / "curves.json", *sorted(run.glob("overlay_*.mp4"))]
+                      for p in [run / "curves.csv", run / "curves.json", *sorted(run.glob("overlay_*.mp4")),
+                                *sorted(run.glob("arkit_*.csv")), *sorted(run.glob("face_*.usd")),
+                                *sorted(run.glob("rig_*.usd")), *sorted(run.glob("rig_*.glb"))]
                       if p.is_file())
     title = title or f"invface sequence fit: {run.name} ({len(names)} frames)"
     page = (f"<!doctype html><html><head><meta charset=utf-8><title>{html.escape(title)}</title><style>"
