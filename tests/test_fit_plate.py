@@ -429,3 +429,26 @@ def test_the_kinds_heat_maps_share_one_scale(tmp_path):
     page = write_report(tmp_path).read_text()
     scales = re.findall(r"scale 0-([0-9.]+) mm", page)
     assert len(scales) == 2 and scales[0] == scales[1] and float(scales[0]) == pytest.approx(0.8 * 0.99, abs=0.01)
+
+
+def test_the_page_says_why_stages_stopped_and_shows_the_truth_beside_the_fit(tmp_path):
+    """The fit page gives each stage's stop reason in words, and, for a synthetic plate with a
+    truth file, the true controls and pose beside the fitted ones."""
+    import trimesh
+    from invface.report.fit import write_report
+    (tmp_path / "p.truth.json").write_text(json.dumps({"weights": {"mouthSmileLeft": 0.7, "jawOpen": 0.0},
+                                                       "rotation": [0.04, -0.1, 0.0], "translation": [0.002, 0, 0]}))
+    d = tmp_path / "blendshape"
+    d.mkdir()
+    d.joinpath("fit.json").write_text(json.dumps({
+        "kind": "blendshape", "weights": {"mouthSmileLeft": 0.5, "browInnerUp": 0.1, "jawOpen": 0.0},
+        "rotation": [0.05, -0.1, 0.0], "translation": [0.003, 0, 0], "status": "curves: cost; shading: radius",
+        "truth": {"file": str(tmp_path / "p.truth.json"), "median_mm": 0.2, "max_mm": 0.9, "depth_median_mm": 0.1, "in_plane_median_mm": 0.1, "shape_median_mm": 0.1, "shape_max_mm": 0.5}}))
+    s = trimesh.creation.icosphere(subdivisions=1, radius=0.05)
+    np.savez(d / "fit.npz", surface=s.vertices, neutral=s.vertices, triangles=s.faces)
+    page = write_report(tmp_path).read_text()
+    assert "The curve stage (Eq. 15) stopped because the cost stopped falling" in page
+    assert "shape from shading (Eq. 16) stopped because no step lowered the cost" in page
+    assert "<td>mouthSmileLeft</td><td>0.700</td><td>0.500</td><td>-0.200</td>" in page
+    assert "<td>browInnerUp</td><td>0.000</td><td>0.100</td>" in page and "<td>jawOpen</td>" not in page
+    assert "<td>head translation x (mm)</td><td>2.000</td><td>3.000</td>" in page

@@ -257,6 +257,58 @@ COMPARE = (("model", lambda s: s["kind"]),
            ("seconds", lambda s: _seconds(s.get("seconds", 0))))
 
 
+# why a solver stopped (``fit.dogleg``'s statuses, the scan fit's), in words for the page
+STOP_WORDS = {"cost": "the cost stopped falling (its relative change fell below the tolerance)",
+              "gradient": "the gradient vanished: a minimum",
+              "step": "the steps became negligible",
+              "radius": "no step lowered the cost any more (the trust region shrank to its floor)",
+              "max_iter": "it reached its iteration limit (--iterations, --max-iter)",
+              "converged": "converged"}
+STAGE_WORDS = {"curves": "the curve stage (Eq. 15)", "shading-coarse": "shape from shading at half resolution",
+               "shading": "shape from shading (Eq. 16)", "shading-simulation": "shape from shading (Eq. 16)"}
+
+
+def status_in_words(status):
+    """fit.json's "status" ("curves: cost; shading: radius") as a sentence: each stage and
+    why it stopped."""
+    parts = []
+    for item in str(status or "").split(";"):
+        stage, _, why = (s.strip() for s in item.partition(": "))
+        name = STAGE_WORDS.get(stage, stage)
+        if why in STOP_WORDS:
+            parts.append(f"{name} stopped because {STOP_WORDS[why]}")
+        elif stage:
+            parts.append(f"{name}: {why}" if why else name)
+    text = "; ".join(parts)
+    return text[:1].upper() + text[1:]
+
+
+def truth_table(summary, threshold=0.02):
+    """HTML: the plate's true controls beside the fitted ones (a synthetic plate's truth file,
+    named in fit.json's "truth"), for every control either sets above ``threshold``, and the
+    head's pose; "" without a readable truth."""
+    path = (summary.get("truth") or {}).get("file")
+    try:
+        truth = json.loads(Path(path).read_text()) if path else None
+    except (OSError, ValueError):
+        return ""
+    if not isinstance(truth, dict) or not isinstance(truth.get("weights"), dict):
+        return ""
+    true_w, fit_w = truth["weights"], summary.get("weights", {})
+    names = sorted({n for n, v in {**true_w, **fit_w}.items() if abs(float(v)) > threshold},
+                   key=lambda n: -abs(float(true_w.get(n, 0))))
+    rows = [(n, float(true_w.get(n, 0)), float(fit_w.get(n, 0))) for n in names]
+    for key, unit, scale in (("rotation", "rad", 1.0), ("translation", "mm", 1000.0)):
+        if key in truth and key in summary:
+            for axis, t, f in zip("xyz", truth[key], summary[key]):
+                rows.append((f"head {key} {axis} ({unit})", scale * float(t), scale * float(f)))
+    body = "".join(f"<tr><td>{html.escape(n)}</td><td>{t:.3f}</td><td>{f:.3f}</td><td>{f - t:+.3f}</td></tr>"
+                   for n, t, f in rows)
+    return ("<details open><summary>the plate's truth beside the fit (weights in [0, 1] unless a unit is "
+            f"given)</summary><table><tr><th>control</th><th>true</th><th>fitted</th><th>fitted - true</th></tr>"
+            f"{body}</table></details>")
+
+
 def _seconds(sec):
     """'total (stage s, ...)' of a {stage: s, "total": s} dict, or one number."""
     if not isinstance(sec, dict):
@@ -288,14 +340,14 @@ def write_report(run, title=None, quick=False):
         notes = "".join(f"<p class=note>{html.escape(n)}</p>" for n in summary.get("notes", []))
         heat = summary.get("mesh_heat", {})
         space = summary.get("plate_colorspace")
-        status = f"status: {html.escape(str(summary.get('status', '')))}; " + (
+        status = f"{html.escape(status_in_words(summary.get('status', '')))}; " + (
             f"plate read as {html.escape(space)}; " if space else "") + (
             f"3D heat map: {html.escape(heat.get('label', ''))}, scale 0-{heat.get('scale_mm', 0):.2f} mm, "
             f"median {heat.get('median_mm', 0):.3f} mm" if not quick else
             f"the 3D heat map and the charts: <code>invface report {html.escape(str(run))}</code>")
         sections.append(
             f"<h2>{html.escape(summary['kind'])} model</h2>{notes}<p>{status}</p>"
-            f"<div class=grid>{figs}</div>"
+            f"<div class=grid>{figs}</div>{truth_table(summary)}"
             f"<details><summary>all parameters (JSON)</summary><pre>{html.escape(json.dumps({k: v for k, v in summary.items() if k != 'history'}, indent=1))}</pre></details>")
     head = "".join(f"<th>{html.escape(n)}</th>" for n, _ in COMPARE)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(str(fn(s)))}</td>" for _, fn in COMPARE) + "</tr>" for s in rows)
