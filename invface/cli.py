@@ -468,6 +468,8 @@ def cmd_demo(args):
     write_object(out / "summary.json", model.summary(), indent=2)
     print(f"wrote {out / 'template_head.npz'}, {len(paths)} preview images; open {paths[-1]}")
     _demo_fit(model, out)
+    from .report.demo import write_demo_index
+    print(f"the demo's page, linking all of it: {write_demo_index(out)}")
     return 0
 
 

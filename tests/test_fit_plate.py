@@ -452,3 +452,20 @@ def test_the_page_says_why_stages_stopped_and_shows_the_truth_beside_the_fit(tmp
     assert "<td>mouthSmileLeft</td><td>0.700</td><td>0.500</td><td>-0.200</td>" in page
     assert "<td>browInnerUp</td><td>0.000</td><td>0.100</td>" in page and "<td>jawOpen</td>" not in page
     assert "<td>head translation x (mm)</td><td>2.000</td><td>3.000</td>" in page
+
+
+def test_the_demo_page_links_what_the_demo_made(tmp_path):
+    """reports/demo/index.html: every section's files that exist, pictures shown and files
+    linked, each link resolving inside the folder; sections with nothing made are left out."""
+    import re
+    from invface.report.demo import write_demo_index
+    for name in ("preview/skin_front.png", "expressions.png", "calib_compare.png", "calib.npz",
+                 "fit-smile/index.html", "fit-smile/blendshape/wipe.png", "fit-smile/arkit_blendshape.csv"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_bytes(b"x")
+    page = write_demo_index(tmp_path).read_text()
+    links = set(re.findall(r'(?:href|src)="([^"]+)"', page))
+    assert links == {"preview/skin_front.png", "expressions.png", "calib_compare.png", "calib.npz",
+                     "fit-smile/index.html", "fit-smile/blendshape/wipe.png", "fit-smile/arkit_blendshape.csv"}
+    assert all((tmp_path / link).is_file() for link in links)
+    assert "Sample plates" not in page and "The fit" in page and page.count("<img") == 4
