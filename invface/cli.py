@@ -473,6 +473,31 @@ def cmd_demo(args):
     return 0
 
 
+def cmd_samples(args):
+    """Inputs to try every recipe on, with no downloads: scikit-image's astronaut portrait (public
+    domain) as a photo; the built-in head rendered as a clip and as sample plates, each with its
+    truth; and the head's skin, made wider and smiling, as a scan to build an actor from."""
+    import numpy as np
+    from skimage.data import astronaut
+    from .fit.samples import write_sample_clip, write_sample_plates
+    from .io.images import write_display_image
+    from .io.meshes import write_mesh
+    out = Path(args.output)
+    _fresh_output(out, args.overwrite, folder=True)
+    photo = write_display_image(out / "photo.png", astronaut())
+    print(f"a photo: {photo} (scikit-image's astronaut, public domain)", flush=True)
+    model = _load_model(None, args.resolution)
+    plates = write_sample_plates(model, out / "plates", progress=_progress)
+    print(f"sample plates with known controls, light and albedo: {len(plates)} in {out / 'plates'} "
+          "(NAME.truth.json beside each)", flush=True)
+    _, clip = write_sample_clip(model, out / "clip", n=args.frames, progress=_progress)
+    print(f"a clip of {args.frames} frames with its truth per frame: {clip}", flush=True)
+    skin = model.surface({"mouthSmileLeft": 0.5, "mouthSmileRight": 0.5}, kind="blendshape")
+    scan = skin * np.array([1.05, 0.98, 1.0])                  # another face: wider, a little shorter
+    print(f"a scan (the head's skin made wider and smiling, in metres): {write_mesh(out / 'scan.obj', scan, model.triangles)}")
+    return 0
+
+
 def _demo_fit(model, out):
     """Sample plates with known controls; calibrate on the neutral one (Eq. 14), fit the
     simulation-made smile with both model kinds (Eq. 15-16), write the report."""
@@ -721,6 +746,14 @@ def build_parser():
     d.add_argument("-o", "--out", "--output", dest="output", default="reports/demo", help="output folder")
     d.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     d.set_defaults(func=cmd_demo)
+    sa = sub.add_parser("samples", help="write inputs to try invface on, with no downloads: a photo, a clip "
+                                        "and sample plates with known truth, and a scan")
+    sa.add_argument("output", nargs="?", default="samples", help="folder to write them into")
+    sa.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor of the head that "
+                                                                     "renders the clip, the plates and the scan")
+    sa.add_argument("--frames", type=COUNT, default=24, help="the clip's length in frames (at 24 fps)")
+    sa.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
+    sa.set_defaults(func=cmd_samples)
     for words, example in EXAMPLES.items():
         parser = sub.choices[words[0]]
         for w in words[1:]:
@@ -742,6 +775,7 @@ EXAMPLES = {
     ("export",): ["invface export take --format csv,usd,usdskel,gltf"],
     ("camera", "calibrate"): ["invface camera calibrate board/*.jpg --board 9x6 --square 0.025 -o camera.json"],
     ("demo",): ["invface demo -o reports/demo"],
+    ("samples",): ["invface samples samples     # then: invface fit-plate samples/photo.png -o fit"],
 }
 
 

@@ -99,7 +99,7 @@ def write_sample_clip(model, folder, n=24, kind="blendshape", size=(320, 240), f
                       curve_noise=0.3, video=True, progress=None):
     """A synthetic clip with known truth from ``clip_controls``: folder/frames/frame_NNN.png
     with each frame's camera, truth and curve files (a folder sequence), and with ``video``
-    folder/clip.mp4 (MPEG-4, lossy), its camera clip.json and the per-frame sidecars
+    folder/clip.mp4 (H.264, lossy), its camera clip.json and the per-frame sidecars
     clip.frame_NNNNNN.truth.json / .curves.json beside it. Deterministic (but for the video
     encoder). Returns (frames folder, video path or None)."""
     import contextlib
