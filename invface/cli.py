@@ -602,7 +602,7 @@ def build_parser():
                         "simulate the template's older FACS-style action units on the new anatomy, or none. "
                         "With --blendshapes named in ARKit's or ICT-FaceKit's style, the controls the folder "
                         "lacks are filled from the template")
-    b.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor (1 = ~35k tets)")
+    b.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor (dimensionless; 1 = ~35k tets)")
     b.add_argument("--force", action="store_true", help="regenerate instead of using the cache")
     b.add_argument("-o", "--output", help="write the bundle here (.npz)")
     b.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
@@ -611,12 +611,12 @@ def build_parser():
     s = sub.add_parser("simulate", help="pose the model by muscle activations or blendshape-driven tracks "
                                         "(quasistatic simulation)")
     s.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
-    s.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model")
+    s.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model (dimensionless; 1 = ~35k tets)")
     s.add_argument("--activations", help='JSON file: {"activations": {"zygomaticus_major_L": 0.8, ...}, "jaw": [6]}')
     s.add_argument("--set", action="append", metavar="MUSCLE=A", help="set one activation (repeatable)")
     s.add_argument("--weight", action="append", metavar="SHAPE=W",
                    help="blendshape weight driving the muscle tracks (repeatable; paper 000 Sec. 6)")
-    s.add_argument("--jaw", type=FINITE, help="jaw opening angle (rad) about the hinge")
+    s.add_argument("--jaw", type=FINITE, help="jaw opening angle (rad) about the hinge; default: closed, or as the weights' tracks set it")
     s.add_argument("-o", "--output", help="write the posed skin mesh (OBJ/PLY)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     s.add_argument("--preview", help="write a PNG: neutral (top) and posed (bottom), front and 3/4")
@@ -627,7 +627,7 @@ def build_parser():
     c.add_argument("--camera", help="JSON camera file (default: PLATE.json beside the plate, else the "
                                     "front view)")
     c.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
-    c.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model")
+    c.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model (dimensionless; 1 = ~35k tets)")
     c.add_argument("--pose", type=FINITE, nargs=6, metavar=("RX", "RY", "RZ", "TX", "TY", "TZ"),
                    help="rigid head pose: Euler XYZ (rad) and translation (m); default identity")
     c.add_argument("--auto-pose", action="store_true",
@@ -635,7 +635,7 @@ def build_parser():
     c.add_argument("--curves", help="plate curve file (JSON) for --auto-pose; default PLATE.curves.json "
                    "beside the plate, else the landmark detector")
     c.add_argument("--curve-lambda", type=NON_NEGATIVE, help=CURVE_LAMBDA_HELP)
-    c.add_argument("--lam", type=NON_NEGATIVE, help="albedo smoothness weight lambda of Eq. 14 (default: the paper's "
+    c.add_argument("--lam", type=NON_NEGATIVE, help="albedo smoothness weight lambda of Eq. 14 (dimensionless: linear light^2 per albedo difference^2; default: the paper's "
                                              "2500; with --auto-pose scaled with the face's size like lambda_1)")
     c.add_argument("--max-iter", type=COUNT, default=30, help="Gauss-Newton iterations at most")
     c.add_argument("-o", "--output", default="calib.npz", help="calibration file to write (.npz)")
@@ -645,12 +645,12 @@ def build_parser():
     fs.add_argument("scan", help="scan mesh (OBJ/PLY, model frame: +Y up, face along +Z)")
     fs.add_argument("--unit", choices=["m", "cm", "mm"], help="the scan's unit (default: found from its size)")
     fs.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
-    fs.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model")
+    fs.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model (dimensionless; 1 = ~35k tets)")
     fs.add_argument("--model-kind", choices=["blendshape", "simulation"], default="blendshape",
                     help="blendshape: the rig alone (paper 000 Eq. 1-2, fast); simulation: the muscle-driven flesh")
     fs.add_argument("--mode", choices=["correspondence", "nearest"], default="correspondence",
                     help="correspondence: same topology as the model; nearest: any mesh, point-to-plane")
-    fs.add_argument("--lam", type=NON_NEGATIVE, default=EQ13_LAMBDA, help="weight regulariser lambda of Eq. 13 (paper: 1e-6)")
+    fs.add_argument("--lam", type=NON_NEGATIVE, default=EQ13_LAMBDA, help="weight regulariser lambda of Eq. 13 (m^2 per unit weight^2, the residuals being in m; paper: 1e-6)")
     fs.add_argument("--max-iter", type=COUNT, default=50, help="dogleg iterations at most (per round)")
     fs.add_argument("-o", "--output", default="reports/fit-scan", help="output folder")
     fs.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
@@ -693,11 +693,11 @@ def build_parser():
     fp.add_argument("--curves", help="plate curve file (JSON); default PLATE.curves.json beside the plate, "
                                      "else the automatic landmark detector")
     fp.add_argument("--face", type=NON_NEGATIVE_INT, default=0,
-                    help="which face the detector fits when the plate shows several: 0 the first found (the whole "
+                    help="which face the detector fits when the plate shows several (an index from 0): 0 the first found (the whole "
                          "frame first, then crops around face proposals, largest first), 1 the next, ...")
     fp.add_argument("--camera", help="JSON camera file (default: PLATE.json beside the plate, else the front view)")
     fp.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
-    fp.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model")
+    fp.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model (dimensionless; 1 = ~35k tets)")
     fp.add_argument("--model-kind", choices=["blendshape", "simulation", "both"], default="blendshape",
                     help="blendshape: the rig alone (paper 000 Eq. 1-2, fast); simulation: the muscle-driven flesh "
                     "(lips keep their volume, contacts hold); both: each, compared in the report")
@@ -749,7 +749,7 @@ def build_parser():
     sa = sub.add_parser("samples", help="write inputs to try invface on, with no downloads: a photo, a clip "
                                         "and sample plates with known truth, and a scan")
     sa.add_argument("output", nargs="?", default="samples", help="folder to write them into")
-    sa.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor of the head that "
+    sa.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor (dimensionless) of the head that "
                                                                      "renders the clip, the plates and the scan")
     sa.add_argument("--frames", type=COUNT, default=24, help="the clip's length in frames (at 24 fps)")
     sa.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")

@@ -58,3 +58,31 @@ def test_every_verbs_example_parses():
         argv = shlex.split(line.split("#")[0])[1:]
         args = build_parser().parse_args(argv)
         assert callable(args.func), line
+
+
+UNITS = ("rad", "m", "mm", "px", "px^2", "s", "fps", "frame", "frames", "iterations", "processes", "dimensionless",
+         "index", "metres", "share")
+
+
+def test_every_numeric_flag_states_its_default_and_unit():
+    """Every numeric option's help (docs/cli.md's row) gives its default, argparse's "(default:
+    ...)" or its own words, and a unit (or says it has none: "dimensionless", an index)."""
+    import argparse
+    import re
+
+    from invface import cli
+    numeric = {cli.COUNT, cli.POSITIVE, cli.NON_NEGATIVE, cli.FINITE, cli.NON_NEGATIVE_INT, float, int}
+    missing = []
+
+    def walk(parser, verb):
+        for a in parser._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                for name, sub in a.choices.items():
+                    walk(sub, f"{verb} {name}".strip())
+            elif a.type in numeric:
+                text = a.help or ""
+                words = set(re.findall(r"[a-z^0-9]+", text.replace("px^2", " px^2 ")))
+                if not ("default" in text or a.default is not None) or not words & set(UNITS):
+                    missing.append(f"{verb} {a.option_strings[-1]}: {text}")
+    walk(cli.build_parser(), "")
+    assert not missing, missing
