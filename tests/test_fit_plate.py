@@ -459,13 +459,13 @@ def test_the_demo_page_links_what_the_demo_made(tmp_path):
     linked, each link resolving inside the folder; sections with nothing made are left out."""
     import re
     from invface.report.demo import write_demo_index
-    for name in ("preview/skin_front.png", "expressions.png", "calib_compare.png", "calib.npz",
+    for name in ("preview/skin_front.png", "preview/contact_sheet.png", "expressions.png", "calib_compare.png", "calib.npz",
                  "fit-smile/index.html", "fit-smile/blendshape/wipe.png", "fit-smile/arkit_blendshape.csv"):
         (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / name).write_bytes(b"x")
     page = write_demo_index(tmp_path).read_text()
     links = set(re.findall(r'(?:href|src)="([^"]+)"', page))
-    assert links == {"preview/skin_front.png", "expressions.png", "calib_compare.png", "calib.npz",
+    assert links == {"preview/skin_front.png", "preview/contact_sheet.png", "expressions.png", "calib_compare.png", "calib.npz",
                      "fit-smile/index.html", "fit-smile/blendshape/wipe.png", "fit-smile/arkit_blendshape.csv"}
     assert all((tmp_path / link).is_file() for link in links)
     assert "Sample plates" not in page and "The fit" in page and page.count("<img") == 4
