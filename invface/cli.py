@@ -280,7 +280,7 @@ def cmd_fit_scan(args):
 
 
 def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False, workers=None, scheduler=None,
-                run=None, security=None, exports=("csv", "usd")):
+                run=None, security=None, exports=("csv", "usd"), usd_ascii=False):
     """Fit a clip's frames (``pipeline.sequence.fit_sequence``) with bars, a line per finished
     kind and the report paths; on a Dask cluster with ``workers`` or ``scheduler``. run: more
     keys for run.json (what the calibration was made from); exports: the formats written at the
@@ -310,7 +310,7 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
     try:
         rows = fit_sequence(model, clip, cal, out, kinds, curves=curves, progress=bars, on_kind=kind_done,
                             on_frame=frame_done, force=force, keep=False, workers=workers, scheduler=scheduler,
-                            extra=run, security=security, exports=exports, **options)
+                            extra=run, security=security, exports=exports, usd_ascii=usd_ascii, **options)
     finally:
         bars.close()
     distributed = (workers or scheduler) and len(clip) > 1
@@ -342,7 +342,7 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
     rigs = [f for f in exports if f in ("usdskel", "gltf")]
     if rigs and out is not None:
         from .pipeline.outputs import export
-        for path in export(out, rigs, model=model):
+        for path in export(out, rigs, model=model, usd_ascii=usd_ascii):
             print(f"the rig animated by the fit: {path}", flush=True)
 
 
@@ -424,7 +424,8 @@ def cmd_fit_plate(args):
     if args.face:
         options["face"] = args.face
     _fit_frames(model, clip, cal, kinds, out, options, curves=args.curves, force=args.restart,
-                workers=args.workers, scheduler=args.scheduler, run=run, security=security, exports=args.export)
+                workers=args.workers, scheduler=args.scheduler, run=run, security=security, exports=args.export,
+                usd_ascii=args.usd_ascii)
     return 0
 
 
@@ -442,7 +443,7 @@ def cmd_export(args):
     """Write an existing fit run's exports (``pipeline.outputs.export``)."""
     from .pipeline.outputs import export
     for path in export(args.run, [f.strip() for f in args.format.split(",") if f.strip()], fps=args.fps,
-                       model=args.model):
+                       model=args.model, usd_ascii=args.usd_ascii):
         print(f"wrote {path}")
     return 0
 
@@ -669,6 +670,7 @@ def build_parser():
                          "arkit_<kind>.csv), usd (the take: face_<kind>.usd with the camera and the plate card), "
                          "usdskel (the rig in UsdSkel, rig_<kind>.usd), gltf (the rig, rig_<kind>.glb); "
                          "default csv,usd; 'invface export' writes them later")
+    fp.add_argument("--usd-ascii", action="store_true", help="write the USD files as text (.usda), not binary (.usd)")
     fp.add_argument("--neutral-frame", type=NON_NEGATIVE_INT, help="frame number to calibrate on when no --calib "
                     "(default: the most neutral-looking of 8 frames spread over the selection)")
     fp.add_argument("--temporal", type=NON_NEGATIVE, default=TEMPORAL_LAMBDA,
@@ -729,6 +731,7 @@ def build_parser():
                     "gltf (rig_<kind>.glb: the same rig as glTF 2.0 morph targets and a skin) (default: %(default)s)")
     ex.add_argument("--model", help="for usdskel and gltf: the model bundle the run was fitted with (default: the run's "
                     "actor.npz, else the built-in head)")
+    ex.add_argument("--usd-ascii", action="store_true", help="write the USD files as text (.usda), not binary (.usd)")
     ex.add_argument("--fps", type=POSITIVE, help="the clip's frame rate (frames per second) for the timecodes "
                     "(default: the run's, else 24)")
     ex.set_defaults(func=cmd_export)

@@ -60,6 +60,7 @@ def _clip(tmp_path, model):
         d.joinpath("fit.json").write_text(json.dumps({
             "frame": 10 + i, "arkit": arkit, "rotation": rot.tolist(), "translation": tr.tolist(),
             "eyes": {"L": {"yaw": 0.05 * i, "pitch": 0.0}, "R": {"yaw": 0.05 * i, "pitch": 0.01}},
+            "activations": {"zygomaticus_major_L": 0.1 * i},
             "flagged": "curves jumped" if i == 1 else ""}))
         plate = np.full((cam.height, cam.width, 3), 0.1 * (i + 1), np.float32)
         np.savez(d / "fit.npz", surface=xr, triangles=model.triangles, camera=np.array(json.dumps(cam.to_dict())),
@@ -90,6 +91,7 @@ def test_a_take_reads_back_in_usd_and_its_camera_projects_as_ours(tmp_path, smal
     assert prim.GetAttribute("arkit:jawOpen").Get(12) == pytest.approx(0.4)
     assert len([a for a in prim.GetAttributes() if a.GetName().startswith("arkit:")]) == 52
     assert list(prim.GetAttribute("invface:eyeYawPitch").Get(12)) == pytest.approx([0.1, 0.0, 0.1, 0.01])
+    assert prim.GetAttribute("invface:muscle:zygomaticus_major_L").Get(12) == pytest.approx(0.2)
     # the camera: USD's own view and projection matrices put the mesh where ours does
     gf = UsdGeom.Camera(stage.GetPrimAtPath("/Capture/Camera")).GetCamera(10)
     V, P = np.array(gf.frustum.ComputeViewMatrix()), np.array(gf.frustum.ComputeProjectionMatrix())
@@ -110,6 +112,20 @@ def test_a_take_reads_back_in_usd_and_its_camera_projects_as_ours(tmp_path, smal
     assert texture.Get(12).resolvedPath == str(run / "plates" / "f2.jpg")
     from invface.io.images import load_image
     assert load_image(run / "plates" / "f2.jpg").rgb.mean() == pytest.approx(0.3, abs=0.01)
+
+
+def test_usd_as_text(tmp_path, small_expressive_model):
+    """``--usd-ascii``: the take and the rig as .usda, text that USD reads back the same."""
+    from pxr import Usd, UsdGeom
+    m = small_expressive_model
+    run, _, surfaces = _clip(tmp_path, m)
+    _with_controls(run, m)
+    paths = invface.export(run, formats=("usd", "usdskel"), model=m, usd_ascii=True)
+    assert [p.name for p in paths] == ["face_blendshape.usda", "rig_blendshape.usda"]
+    assert paths[0].read_text().startswith("#usda 1.0")
+    stage = Usd.Stage.Open(str(paths[0]))
+    pts = UsdGeom.Mesh(stage.GetPrimAtPath("/Capture/Face")).GetPointsAttr()
+    np.testing.assert_allclose(np.array(pts.Get(12)) / 100.0, surfaces[2], atol=1e-6)
 
 
 def test_export_refuses_an_unknown_format(tmp_path):

@@ -11,7 +11,9 @@ The point cache's stage (``write_usd``):
                               world frame (the head's pose applied); triangles, no subdivision
                               Float attributes arkit:<name> (the 52 ARKit controls, [0, 1]) and
                               invface:headRotation (Euler XYZ rad), invface:headTranslation (m),
-                              invface:eyeYawPitch (left yaw, pitch, right yaw, pitch rad), per frame
+                              invface:eyeYawPitch (left yaw, pitch, right yaw, pitch rad), and for
+                              the simulation kind invface:muscle:<name> (each muscle's
+                              activation, [0, 1]), per frame
     /Capture/Camera           Camera: the plate's solved camera (focal length and apertures in
                               mm, tenths of the stage unit, on a 36 mm film back; the principal
                               point as aperture offsets)
@@ -80,7 +82,8 @@ def write_usd(path, data):
     """Write the take's stage to ``path`` (.usd, .usda or .usdc) atomically. data: {"fps": float,
     "triangles": (F, 3) int, "camera": {"K" (3,3), "R" (3,3), "t" (3,), "width", "height"},
     "frames": [{"frame": int, "points": (V, 3) m posed, "arkit": {name: value},
-    "rotation" (3,) rad, "translation" (3,) m, "eyes" (4,) rad}]} (frames in time order);
+    "rotation" (3,) rad, "translation" (3,) m, "eyes" (4,) rad, "activations": {muscle:
+    [0, 1]} (the simulation kind)}]} (frames in time order);
     optional "plates": {frame: image path relative to ``path``'s folder} for the card behind
     the face and "plate_sources": [the plate files the fit read]. Returns the Path."""
     Gf, Sdf, Usd, UsdGeom, Vt = _pxr()
@@ -122,6 +125,8 @@ def _face(stage, frames, tri, Gf, Sdf, UsdGeom, Vt):
     prim = mesh.GetPrim()
     names = sorted({k for f in frames for k in f.get("arkit", {})})
     arkit = {n: prim.CreateAttribute(f"arkit:{n}", Sdf.ValueTypeNames.Float) for n in names}
+    muscles = sorted({k for f in frames for k in f.get("activations") or {}})
+    muscle = {n: prim.CreateAttribute(f"invface:muscle:{n}", Sdf.ValueTypeNames.Float) for n in muscles}
     head_r = prim.CreateAttribute("invface:headRotation", Sdf.ValueTypeNames.Float3)
     head_t = prim.CreateAttribute("invface:headTranslation", Sdf.ValueTypeNames.Float3)
     eyes = prim.CreateAttribute("invface:eyeYawPitch", Sdf.ValueTypeNames.FloatArray)
@@ -132,6 +137,8 @@ def _face(stage, frames, tri, Gf, Sdf, UsdGeom, Vt):
         extent.Set(Vt.Vec3fArray([Gf.Vec3f(*x.min(0).tolist()), Gf.Vec3f(*x.max(0).tolist())]), t)
         for n, a in arkit.items():
             a.Set(float(f.get("arkit", {}).get(n, 0.0)), t)
+        for n, a in muscle.items():
+            a.Set(float((f.get("activations") or {}).get(n, 0.0)), t)
         head_r.Set(Gf.Vec3f(*np.asarray(f.get("rotation", np.zeros(3)), float).tolist()), t)
         head_t.Set(Gf.Vec3f(*np.asarray(f.get("translation", np.zeros(3)), float).tolist()), t)    # m
         eyes.Set(Vt.FloatArray(np.asarray(f.get("eyes", np.zeros(4)), float).tolist()), t)

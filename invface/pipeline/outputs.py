@@ -168,15 +168,16 @@ def take_frames(run, kind, single, points=True):
                 tri, cam = d["triangles"], json.loads(str(d["camera"]))
         e = livelink_eyes(r.get("eyes"))
         frames.append({"frame": r.get("frame", i), "points": surface, "arkit": r.get("arkit", {}),
+                       "activations": r.get("activations") or {},
                        "rotation": r.get("rotation", [0, 0, 0]), "translation": r.get("translation", [0, 0, 0]),
                        "eyes": e[[0, 1, 3, 4]], "record": r})
     return (frames, tri, cam) if frames else None
 
 
-def write_usd_takes(out, kinds, fps=24.0, single=False):
-    """out/face_<kind>.usd per kind: the take as a USD stage (``io.usd``), with the frames'
-    plates (out/plates/<frame>.jpg, written once for all kinds) on a card behind the face.
-    Returns the paths of the USD files."""
+def write_usd_takes(out, kinds, fps=24.0, single=False, suffix=".usd"):
+    """out/face_<kind><suffix> per kind (".usd" binary, ".usda" text): the take as a USD stage
+    (``io.usd``), with the frames' plates (out/plates/<frame>.jpg, written once for all kinds)
+    on a card behind the face. Returns the paths of the USD files."""
     from ..io.exporters import export
     paths, written = [], {}
     for kind in kinds:
@@ -185,7 +186,7 @@ def write_usd_takes(out, kinds, fps=24.0, single=False):
             frames, tri, cam = take
             plates = plate_images(out, frames, written)
             sources = sorted({str(f["record"].get("plate", "")) for f in frames} - {""})
-            paths.append(export(Path(out) / f"face_{kind}.usd",
+            paths.append(export(Path(out) / f"face_{kind}{suffix}",
                                 {"frames": frames, "triangles": tri, "camera": cam, "fps": fps or 24.0,
                                  "plates": plates, "plate_sources": sources}))
     return paths
@@ -241,7 +242,7 @@ def rig_frames(run, kind, single, model):
 
 def write_rigs(out, kinds, model, fps=24.0, single=False, suffix=".usd"):
     """out/rig_<kind><suffix> per kind: the model's blendshape rig animated by the kind's fitted
-    controls, in UsdSkel (".usd": ``io.usd.write_usd_rig``) or glTF (".glb": ``io.gltf.write_glb``).
+    controls, in UsdSkel (".usd", ".usda" as text: ``io.usd.write_usd_rig``) or glTF (".glb": ``io.gltf.write_glb``).
     Returns the paths."""
     from ..io.exporters import export
     paths = []
@@ -254,18 +255,18 @@ def write_rigs(out, kinds, model, fps=24.0, single=False, suffix=".usd"):
                 "names": list(model.blendshape_names), "deltas": model.blendshapes,
                 "jaw_weights": model.jaw_weights, "frames": frames}
         path = Path(out) / f"rig_{kind}{suffix}"
-        paths.append(export(path, data, format="usdskel") if suffix == ".usd" else export(path, data))
+        paths.append(export(path, data, format="usdskel") if suffix.startswith(".usd") else export(path, data))
     return paths
 
 
-def write_sequence_outputs(out, kinds, fps=0.0, exports=("csv", "usd")):
+def write_sequence_outputs(out, kinds, fps=0.0, exports=("csv", "usd"), usd_suffix=".usd"):
     """The sequence's files from its frames' records: curves.csv/json, the Live Link Face CSV
-    ("csv" in ``exports``), the USD take ("usd"), an overlay MP4 per kind, and the sequence page
-    (index.html). Returns their paths."""
+    ("csv" in ``exports``), the USD take ("usd"; ``usd_suffix`` ".usda" for text), an overlay
+    MP4 per kind, and the sequence page (index.html). Returns their paths."""
     from ..report.sequence import write_sequence_report
     paths = list(write_curves_files(out, kinds))
     paths += write_arkit_csv(out, kinds, fps or 24.0) if "csv" in exports else []
-    paths += write_usd_takes(out, kinds, fps or 24.0) if "usd" in exports else []
+    paths += write_usd_takes(out, kinds, fps or 24.0, suffix=usd_suffix) if "usd" in exports else []
     paths += [p for k in kinds if (p := write_overlay_video(out, k, fps or 24.0)) is not None]
     paths.append(write_sequence_report(out))
     return paths
@@ -274,14 +275,15 @@ def write_sequence_outputs(out, kinds, fps=0.0, exports=("csv", "usd")):
 EXPORT_FORMATS = ("csv", "usd", "usdskel", "gltf")
 
 
-def export(run_dir, formats=("csv",), fps=None, model=None):
+def export(run_dir, formats=("csv",), fps=None, model=None, usd_ascii=False):
     """Write an existing fit run's exports into its folder: "csv" is the Live Link Face CSV per
     kind (``write_arkit_csv``: arkit_<kind>.csv), "usd" the take as a USD stage per kind
     (``write_usd_takes``: face_<kind>.usd: the fitted face's points per frame, the solved camera,
     the ARKit controls), "usdskel" and "gltf" the model's rig animated by the fit (``write_rigs``:
     rig_<kind>.usd, rig_<kind>.glb). run_dir: a fit-plate output folder (a photo's, with
     <kind>/fit.json, or a sequence's, with <frame>/<kind>/fit.json); fps: the clip's frame rate
-    (default run.json's, else 24); model: the model the run was fitted with (``run_model``).
+    (default run.json's, else 24); model: the model the run was fitted with (``run_model``);
+    usd_ascii: the USD files as text (.usda) rather than binary (.usd).
     Returns the paths written; InvfaceError naming the folder when it holds no fit, or an
     unknown format."""
     from ..errors import InvfaceError
@@ -300,8 +302,9 @@ def export(run_dir, formats=("csv",), fps=None, model=None):
                            "<frame>/<kind>/fit.json): give a fit-plate output folder")
     rate = fps or record.get("fps") or 24.0
     paths = write_arkit_csv(run, kinds, rate, single=bool(single)) if "csv" in formats else []
-    paths += write_usd_takes(run, kinds, rate, single=bool(single)) if "usd" in formats else []
-    rigs = [(f, suffix) for f, suffix in (("usdskel", ".usd"), ("gltf", ".glb")) if f in formats]
+    usd = ".usda" if usd_ascii else ".usd"
+    paths += write_usd_takes(run, kinds, rate, single=bool(single), suffix=usd) if "usd" in formats else []
+    rigs = [(f, suffix) for f, suffix in (("usdskel", usd), ("gltf", ".glb")) if f in formats]
     model = run_model(run, model) if rigs else None
     for _, suffix in rigs:
         paths += write_rigs(run, kinds, model, rate, single=bool(single), suffix=suffix)

@@ -27,7 +27,8 @@ from .runs import finish_run, run_hash, start_run
 
 def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), curves=None, progress=None,
                  on_kind=None, on_frame=None, force=False, camera=None, select=None, keep=True, workers=None,
-                 scheduler=None, extra=None, security=None, colorspace=None, exports=("csv", "usd"), **options):
+                 scheduler=None, extra=None, security=None, colorspace=None, exports=("csv", "usd"), usd_ascii=False,
+                 **options):
     """Fit a plate sequence in order (``fit_frames``). frames: a Clip, a
     video, numbered sequence, folder or image path (``open_clip``, with ``select``
     "START:STOP[:STEP]" or "FIRST-LAST[xSTEP]", ``camera`` and ``colorspace``), or a list of
@@ -38,8 +39,8 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
     sequence outputs (``write_sequence_outputs``); ``workers`` or ``scheduler``: on a Dask
     cluster (``distributed.fit_sequence_distributed``; needs ``out``; ``security``: a
     ``distributed.Security`` for a TLS scheduler); ``extra``: more keys for
-    run.json; ``exports``: which of "csv" (Live Link Face) and "usd" (the take) are written at
-    the end (the rigs: ``outputs.export``). progress receives the fits' events, {"message": ...} for each step (a resumed
+    run.json; ``exports``: which of "csv" (Live Link Face) and "usd" (the take; text .usda with
+    ``usd_ascii``) are written at the end (the rigs: ``outputs.export``). progress receives the fits' events, {"message": ...} for each step (a resumed
     run, the sequence files written) and, on a cluster, {"done": frames, "total": frames}.
     Returns the per-frame summaries of ``fit_frames``, each with its FrameFit as "fit" when
     fitted on this process and ``keep`` (a long clip's fits are on disk: their renders would
@@ -64,21 +65,23 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
     if out is not None:
         finish_run(out)
         if len(clip) > 1:
-            paths = write_sequence_outputs(out, kinds, fps=clip.fps, exports=exports)
+            paths = write_sequence_outputs(out, kinds, fps=clip.fps, exports=exports,
+                                           usd_suffix=".usda" if usd_ascii else ".usd")
             named = lambda test: ", ".join(str(p) for p in paths if test(p.name))
             _say(progress, message="animation curves: " + named(lambda n: n.startswith("curves.")))
             if "csv" in exports:
                 _say(progress, message="ARKit curves (Live Link Face CSV): " + named(lambda n: n.startswith("arkit_")))
             if "usd" in exports:
                 _say(progress, message="the take as USD (mesh per frame, camera, ARKit controls, plate card): "
-                     + named(lambda n: n.endswith(".usd")))
+                     + named(lambda n: n.endswith((".usd", ".usda"))))
             if any(p.suffix == ".mp4" for p in paths):
                 _say(progress, message="overlay video(s) (plate | render | wipe): " + named(lambda n: n.endswith(".mp4")))
             _say(progress, message=f"sequence report: {paths[-1]}")
         else:
             for p in write_arkit_csv(out, kinds, clip.fps or 24.0, single=True) if "csv" in exports else []:
                 _say(progress, message=f"ARKit controls (Live Link Face CSV): {p}")
-            for p in write_usd_takes(out, kinds, clip.fps or 24.0, single=True) if "usd" in exports else []:
+            usd = ".usda" if usd_ascii else ".usd"
+            for p in write_usd_takes(out, kinds, clip.fps or 24.0, single=True, suffix=usd) if "usd" in exports else []:
                 _say(progress, message=f"the fit as USD (mesh, camera, ARKit controls, plate card): {p}")
     return rows
 
