@@ -376,14 +376,18 @@ def cmd_fit_plate(args):
                                    f"({numbers[0]}..{numbers[-1]})")
             pos = numbers.index(args.neutral_frame)
             frame = next(clip.frames(pos, pos + 1))
+            run["calibration_why"] = "given with --neutral-frame"
             curves, source = find_curves(model, frame.plate, args.curves, face=args.face, crop=len(clip) == 1)
         elif len(clip) == 1:
             frame = next(clip.frames())
             curves, source = find_curves(model, frame.plate, args.curves, face=args.face, crop=len(clip) == 1)
         else:
-            print("picking the most neutral-looking frame to calibrate on", flush=True)
-            frame, curves, source, pose = pick_neutral(model, clip, lam=args.curve_lambda, progress=_events,
-                                                       face=args.face)
+            print("picking the most neutral-looking frame of the whole shot to calibrate on", flush=True)
+            whole = open_clip(args.plate, None, args.camera, args.colorspace)
+            frame, curves, source, pose, why = pick_neutral(model, whole, lam=args.curve_lambda, progress=_events,
+                                                            face=args.face)
+            run["calibration_why"] = why
+            print(f"calibrating on {frame.name}: {why}", flush=True)
     before = {} if args.restart else read_run(out)
     mine = {"identity_from": frame.digest if identity else None}
     if not args.calib:

@@ -200,3 +200,24 @@ def test_detector_tracks_the_real_clip_in_video_mode():
     assert pts.shape == (12, 478, 2) and np.abs(again - pts[0]).max() < 1.0
     step = np.linalg.norm(np.diff(pts[:, [33, 263]], axis=0), axis=2)
     assert step.max() < 8.0, step.max()
+
+
+def test_the_calibration_frame_is_the_most_neutral_of_the_whole_shot(small_expressive_model, clip):
+    """pick_neutral looks over the whole shot, not only the frames asked for: on the sample clip
+    (a smile and the jaw rising and falling over the 6 frames) it picks the first, neutral
+    frame, though the frames asked for are the last three, and says why; a frame whose eyes the
+    detector scores as shut costs EYES_SHUT_COST more."""
+    from invface.fit.samples import clip_controls
+    from invface.pipeline.clips import open_clip
+    from invface.pipeline.neutral import EYES_SHUT_COST, neutral_score, pick_neutral
+    m = small_expressive_model
+    _, frames, _ = clip
+    asked = open_clip(frames, "3:6")
+    assert 0 not in asked.indices
+    frame, curves, source, pose, why = pick_neutral(m, open_clip(frames), candidates=6)
+    truth = [sum(w.values()) + 10 * jaw[0] for w, jaw, _, _ in clip_controls(m, N_FRAMES)]
+    assert frame.index == int(np.argmin(truth)) == 0
+    assert why.startswith("the most neutral-looking of 6 frames spread over the whole shot (expression")
+    open_eyes, _ = neutral_score(pose, {"eyeBlinkLeft": 0.0, "eyeBlinkRight": 0.0})
+    shut, parts = neutral_score(pose, {"eyeBlinkLeft": 1.0, "eyeBlinkRight": 1.0})
+    assert shut - open_eyes == pytest.approx(EYES_SHUT_COST) and set(parts) == {"weights", "jaw", "eyes shut"}

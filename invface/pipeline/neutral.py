@@ -6,16 +6,32 @@ from ..errors import InvfaceError
 from .plates import _say
 
 
+# how much a shut eye counts against a calibration candidate, in the score's units (a weight
+# of 1): the albedo under shut lids is the lids', and the identity's eye curves are a slit
+EYES_SHUT_COST = 2.0
+
+
+def neutral_score(pose, peer=None):
+    """A calibration candidate's expression: the sum of its curve fit's weights, plus 10 x its
+    jaw opening (rad), plus EYES_SHUT_COST x the detector's own mean eyeBlink score (``peer``,
+    MediaPipe's {name: [0, 1]}, when it found the curves). Returns (score, its parts)."""
+    parts = {"weights": float(pose.p[pose.vector.weights].sum()),
+             "jaw": 10 * max(float(pose.p[pose.vector.jaw][0]), 0.0)}
+    if peer and "eyeBlinkLeft" in peer and "eyeBlinkRight" in peer:
+        parts["eyes shut"] = EYES_SHUT_COST * 0.5 * (float(peer["eyeBlinkLeft"]) + float(peer["eyeBlinkRight"]))
+    return sum(parts.values()), parts
+
+
 def pick_neutral(model, clip, candidates=8, lam=None, progress=None, face=0):
     """The clip's most neutral-looking frame to calibrate on (Eq. 14 once per shot): among up
-    to ``candidates`` frames evenly spread over the selection, the one whose curve fit
-    (Eq. 15, blendshape rig, ``pose_from_curves``) has the least expression: the sum of its
-    weights plus 10 x its jaw opening (rad). Returns (Frame, its curves, their source, its
-    PoseEstimate)."""
+    to ``candidates`` frames evenly spread over ``clip`` (the whole shot, not only the frames
+    asked for), the one of least ``neutral_score``: its curve fit's (Eq. 15, blendshape rig,
+    ``pose_from_curves``) expression and jaw, and its eyes shut. Returns (Frame, its curves,
+    their source, its PoseEstimate, a sentence saying why it was chosen)."""
     from .plates import find_curves, pose_from_curves
     n = len(clip)
     positions = sorted({round(i * (n - 1) / max(candidates - 1, 1)) for i in range(min(candidates, n))})
-    best = None
+    best, tried = None, 0
     for pos in positions:
         frame = next(clip.frames(pos, pos + 1))
         try:
@@ -23,15 +39,20 @@ def pick_neutral(model, clip, candidates=8, lam=None, progress=None, face=0):
         except InvfaceError as e:
             _say(progress, message=f"{frame.name}: not a calibration candidate ({e})")
             continue
+        tried += 1
         pose = pose_from_curves(model, frame.plate, curves, lam, source=source)
-        score = float(pose.p[pose.vector.weights].sum() + 10 * max(pose.p[pose.vector.jaw][0], 0.0))
-        _say(progress, message=f"{frame.name}: expression {score:.2f}")
+        score, parts = neutral_score(pose, frame.plate.peer_arkit)
+        _say(progress, message=f"{frame.name}: expression {score:.2f} ("
+                               + ", ".join(f"{k} {v:.2f}" for k, v in parts.items()) + ")")
         if best is None or score < best[0]:
-            best = (score, frame, curves, source, pose)
+            best = (score, frame, curves, source, pose, parts)
     if best is None:
         raise InvfaceError(f"{clip.source}: no face found in the {len(positions)} frames tried for the calibration; "
                            "pass --calib or --neutral-frame")
-    return best[1:]
+    score, frame, curves, source, pose, parts = best
+    why = (f"the most neutral-looking of {tried} frames spread over the whole shot (expression {score:.2f}: "
+           + ", ".join(f"{k} {v:.2f}" for k, v in parts.items()) + ")")
+    return frame, curves, source, pose, why
 
 
 def actor_identity(model, frame, curves, lam=None, pose=None, progress=None):

@@ -29,6 +29,8 @@ def run_notes(run, frame=None):
         return []
     stopped = "" if plan.get("finished") else " (the run stopped before it finished)"
     said = [plan["identity"] + "."] if frame is None and plan.get("identity") else []
+    if frame is None and plan.get("calibration_frame") and plan.get("calibration_why"):
+        said.append(f"Light and albedo were calibrated on {plan['calibration_frame']}: {plan['calibration_why']}.")
     if frame is None and plan.get("frames"):
         found = {f.parent.parent.name for f in earlier_fits(run) if f.parent.parent != run}
         missing = [f for f in plan["frames"] if f not in found]
