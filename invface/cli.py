@@ -46,7 +46,11 @@ class _FitBars:
             if "frames" not in self.bars:
                 self.close()
                 self.bars = {"frames": _bar("frames", total=event["total"], unit="frame")}
-            self.bars["frames"].update(event["done"] - self.bars["frames"].n)
+            bar = self.bars["frames"]
+            bar.update(event["done"] - bar.n)
+            elapsed = bar.format_dict.get("elapsed") or 0.0
+            if bar.n and elapsed > 0:           # tqdm's own ETA is on the bar; the pace as a VFX user reads it
+                bar.set_postfix_str(f"{60.0 * bar.n / elapsed:.1f} frames/min")
             return
         key = (event.get("frame", ""), event.get("kind", ""))
         if key not in self.bars:
@@ -307,6 +311,7 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
             print(f"{frame.name} {kind}: did not finish: {why}", flush=True)
         if frame.fits and len(clip) == 1:
             print(f"report: {folder / 'index.html'}")
+    started = time.perf_counter()
     try:
         rows = fit_sequence(model, clip, cal, out, kinds, curves=curves, progress=bars, on_kind=kind_done,
                             on_frame=frame_done, force=force, keep=False, workers=workers, scheduler=scheduler,
@@ -329,6 +334,11 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
             if len(recs) >= 3:
                 print(f"{kind}: frame-to-frame jitter {jitter(curve_rows(recs)):.3f} (RMS second difference in "
                       "units of 0.1 weight, 0.01 rad, 1 mm)")
+        fitted = len(rows) - len(skipped)
+        seconds = time.perf_counter() - started
+        if fitted and seconds > 0:
+            print(f"{fitted} frames fitted in {seconds:.0f} s: {60 * fitted / seconds:.1f} frames/min, "
+                  f"{seconds / fitted:.1f} s a frame ({', '.join(kinds)}; outputs and reports included)")
         rms = [(k["curve_rms_px"], r["name"], kind) for r in rows for kind, k in r["kinds"].items()
                if k.get("curve_rms_px") is not None]
         if rms:
