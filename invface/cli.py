@@ -199,7 +199,8 @@ def _pose(values, option="--pose"):
     return v[:3], v[3:]
 
 
-def _calibrate(model, plate, out, max_iter, pose=None, curves=None, source="", lam=None, lam_curves=None):
+def _calibrate(model, plate, out, max_iter, pose=None, curves=None, source="", lam=None, lam_curves=None,
+               robust=0):
     """Eq. 14 with a progress bar; the pose given, or (pose None) from the plate's curves.
     Writes out (.npz) and its _compare.png; returns the PlateCalibration."""
     from .fit.lambdas import EQ14_LAMBDA
@@ -215,10 +216,10 @@ def _calibrate(model, plate, out, max_iter, pose=None, curves=None, source="", l
     try:
         if pose is None:
             result = auto_calibrate(model, plate, curves, source, lam_curves=lam_curves, lam=lam, max_iter=max_iter,
-                                    progress=progress)
+                                    progress=progress, robust=robust)
         else:
             result = calibrate_plate(model, plate, *pose, lam=EQ14_LAMBDA if lam is None else lam,
-                                     max_iter=max_iter, progress=progress)
+                                     max_iter=max_iter, progress=progress, robust=robust)
     finally:
         bar.close()
     path, compare = result.save(out)
@@ -239,9 +240,10 @@ def cmd_calibrate(args):
             raise InvfaceError("give either --pose or --auto-pose, not both")
         curves, source = find_curves(model, plate, args.curves, crop=True)
         _calibrate(model, plate, args.output, args.max_iter, curves=curves, source=source, lam=args.lam,
-                   lam_curves=args.curve_lambda)
+                   lam_curves=args.curve_lambda, robust=2 if args.robust else 0)
     else:
-        _calibrate(model, plate, args.output, args.max_iter, pose=_pose(args.pose), lam=args.lam)
+        _calibrate(model, plate, args.output, args.max_iter, pose=_pose(args.pose), lam=args.lam,
+                   robust=2 if args.robust else 0)
     return 0
 
 
@@ -653,6 +655,10 @@ def build_parser():
     c.add_argument("--lam", type=NON_NEGATIVE, help="albedo smoothness weight lambda of Eq. 14 (dimensionless: linear light^2 per albedo difference^2; default: the paper's "
                                              "2500; with --auto-pose scaled with the face's size like lambda_1)")
     c.add_argument("--max-iter", type=COUNT, default=30, help="Gauss-Newton iterations at most")
+    c.add_argument("--robust", action="store_true",
+                   help="for a plate with something over the face (a hand, hair): after a stiff first solve, "
+                        "pixels the face's light and albedo cannot explain weigh less (two reweighted solves); "
+                        "on clean real photos it also takes brows and lips out of the albedo")
     c.add_argument("-o", "--output", default="calib.npz", help="calibration file to write (.npz)")
     c.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     c.set_defaults(func=cmd_calibrate)

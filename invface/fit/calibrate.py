@@ -59,6 +59,12 @@ from ..sim.linsolve import MatrixPattern, make_solver
 from .lambdas import EQ14_LAMBDA
 
 UNSEEN_PULL = 1e-4                         # weight (x lambda) pulling unseen albedo to the mean
+# reweighted solves after the first (``robust_weights``; ``calibrate --robust``). Off by default:
+# on the real photos the features the first, stiff pass cannot explain (brows, lips) lost their
+# weight too, and the fits' curves and image residuals came out worse
+ROBUST_ROUNDS = 0
+ROBUST_K = 1.5
+ROBUST_STIFF = 50.0
 SKIN_ALBEDO = shading.SKIN_ALBEDO           # default mean albedo (the gauge)
 
 
@@ -173,9 +179,19 @@ scalp in every render; with the pull, none. It fades the extension to the gauge'
         return dg, dc
 
 
+def robust_weights(residual, k=ROBUST_K):
+    """Per-pixel weights (M,) of Eq. 14's data rows from their residuals (M, 3): 1 within k
+    robust standard deviations (1.4826 x the median residual norm), then falling as (k s / r)^2
+    (Cauchy-like), so that pixels the face's light and albedo cannot explain (a hand, hair, a
+    frame's edge) stop pulling the albedo; the smoothness term fills it in from around them."""
+    r = np.linalg.norm(np.asarray(residual, float), axis=1)
+    s = 1.4826 * max(float(np.median(r)), 1e-12)
+    return np.minimum(1.0, (k * s / np.maximum(r, 1e-30)) ** 2)
+
+
 def calibrate(model_triangles, x, plate_image, camera, rotation=None, translation=None,
               lam=EQ14_LAMBDA, albedo_mean=SKIN_ALBEDO, mask=None, max_iter=30, tol=1e-7,
-              gamma0=None, albedo0=None, samples=3, progress=None, parts=None, parts_x=None):
+              gamma0=None, albedo0=None, samples=3, progress=None, parts=None, parts_x=None, robust=ROBUST_ROUNDS):
     """Solve Eq. 14 for gamma (9,3) and albedo (V,3) on one plate.
 
     model_triangles (F,3); x (V,3) m: the neutral surface; plate_image (H,W,3) linear;
@@ -184,8 +200,9 @@ def calibrate(model_triangles, x, plate_image, camera, rotation=None, translatio
     pixels to use; samples: rays per pixel side in the coverage operator; progress: called
     with each iteration's log entry; parts, parts_x: the model's ``InnerParts`` and their
     unposed positions (P,3) m (default at rest): pixels where an eye or the mouth shows are
-    left out of the data term (their albedo is the parts' own, not solved for). Returns a
-    Calibration with the iteration log."""
+    left out of the data term (their albedo is the parts' own, not solved for); robust: that
+    many reweighted solves after a first one ROBUST_STIFF times smoother (``robust_weights``),
+    for a plate with something over the face. Returns a Calibration with the iteration log."""
     img = np.asarray(plate_image, np.float64)
     if img.shape[:2] != (camera.height, camera.width):
         raise ImageError(f"plate is {img.shape[1]}x{img.shape[0]} px, camera is "
@@ -215,8 +232,23 @@ def calibrate(model_triangles, x, plate_image, camera, rotation=None, translatio
     Xr = x @ euler_xyz(rot).T + tr
     B = shading.shading_basis(shading.vertex_normals(Xr, model_triangles))
     seen = (np.asarray(W.sum(0)).ravel() > 1e-3).astype(float)
-    sv = _ChannelSolver(W, LtL, lam, seen)
-    mu = np.full(3, 1e-3 * float(W.power(2).sum()) / max(V, 1))
+    weights = np.ones(len(pixels))
+    for rnd in range(1 + max(int(robust), 0)):
+        if rnd:       # reweighted: the rows of pixels the last solve could not explain weigh less
+            weights = robust_weights(W @ (c * (B @ gamma)) - y)
+        sw = np.sqrt(weights)
+        stiff = ROBUST_STIFF if robust and rnd == 0 else 1.0
+        sv = _ChannelSolver((sp.diags(sw) @ W).tocsr(), LtL, lam * stiff, seen)
+        _solve_channels(sv, B, gamma, c, sw[:, None] * y, ref, max_iter, tol, history, t0, progress,
+                        rms=lambda: float(np.sqrt(np.mean((W @ (c * (B @ gamma)) - y) ** 2))), round_=rnd)
+    return Calibration(gamma=gamma, albedo=c, rotation=rot, translation=tr, camera=camera,
+                       lam=float(lam), history=history)
+
+
+def _solve_channels(sv, B, gamma, c, y, ref, max_iter, tol, history, t0, progress, rms, round_=0):
+    """Damped Gauss-Newton on the three channels of Eq. 14 in place (gamma (9, 3), c (V, 3)),
+    until the objective's relative change is below ``tol``; logs each iteration."""
+    mu = np.full(3, 1e-3 * float(sv.W.power(2).sum()) / max(len(c), 1))
 
     def objective():
         return sum(sv.objective(B, gamma[:, ch], c[:, ch], y[:, ch], ref[ch]) for ch in range(3))
@@ -234,8 +266,7 @@ def calibrate(model_triangles, x, plate_image, camera, rotation=None, translatio
                     break
                 mu[ch] *= 10
         new = objective()
-        rms = float(np.sqrt(np.mean((W @ (c * (B @ gamma)) - y) ** 2)))
-        history.append({"iteration": it, "objective": new, "rms": rms,
+        history.append({"iteration": len(history), "round": round_, "objective": new, "rms": rms(),
                         "seconds": time.perf_counter() - t0})
         if progress is not None:
             progress(history[-1])
@@ -243,8 +274,6 @@ def calibrate(model_triangles, x, plate_image, camera, rotation=None, translatio
         obj = new
         if done:
             break
-    return Calibration(gamma=gamma, albedo=c, rotation=rot, translation=tr, camera=camera,
-                       lam=float(lam), history=history)
 
 
 def comparison_image(model_triangles, x, calibration, plate_image, spp=16, parts=None, parts_x=None):

@@ -256,10 +256,11 @@ class PlateCalibration:
 
 
 def calibrate_plate(model, plate, rotation=None, translation=None, shape=None, lam=EQ14_LAMBDA, max_iter=30,
-                    pose=None, progress=None):
+                    pose=None, progress=None, robust=0):
     """Eq. 14 on a loaded plate: SH light and per-vertex albedo with the head at the given
     pose (rotation (3,) rad, translation (3,) m; default identity) and the unposed surface
-    ``shape`` (V, 3) m (default the neutral). progress: each iteration's log entry.
+    ``shape`` (V, 3) m (default the neutral). progress: each iteration's log entry; robust:
+    reweighted solves for a plate with something over the face (``fit.calibrate.calibrate``).
     Returns a PlateCalibration."""
     from ..fit.calibrate import calibrate
     from ..fit.plate import check_plate
@@ -268,13 +269,15 @@ def calibrate_plate(model, plate, rotation=None, translation=None, shape=None, l
     shape = model.neutral if shape is None else np.asarray(shape, float)
     parts_x = model.parts_positions(None if pose is None else pose.p)
     cal = calibrate(model.triangles, shape, plate.image, plate.camera, rotation, translation, lam=lam,
-                    mask=plate.mask, max_iter=max_iter, progress=progress, parts=model.parts, parts_x=parts_x)
+                    mask=plate.mask, max_iter=max_iter, progress=progress, parts=model.parts, parts_x=parts_x,
+                    robust=robust)
     cal.plate = plate.path
     return PlateCalibration(cal, shape, plate, np.asarray(model.triangles), time.perf_counter() - t0, pose,
                             model.parts, parts_x)
 
 
-def auto_calibrate(model, plate, curves, source="given", lam_curves=None, lam=None, max_iter=30, progress=None):
+def auto_calibrate(model, plate, curves, source="given", lam_curves=None, lam=None, max_iter=30, progress=None,
+                   robust=0):
     """Calibrate a plate of unknown pose on itself: pose and expression from its curves
     (Eq. 15), then Eq. 14 on that shape, lambda scaled with the face's size (``face_scale``)
     unless given. Returns a PlateCalibration (its ``pose`` set)."""
@@ -282,7 +285,7 @@ def auto_calibrate(model, plate, curves, source="given", lam_curves=None, lam=No
     _say(progress, message=pose.describe())
     lam = EQ14_LAMBDA * face_scale(curves)[0] if lam is None else lam
     return calibrate_plate(model, plate, pose.rotation, pose.translation, pose.shape, lam, max_iter, pose=pose,
-                           progress=progress)
+                           progress=progress, robust=robust)
 
 
 def score_against_truth(model, fit, truth_path, camera=None):
