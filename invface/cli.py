@@ -359,13 +359,10 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
 
 
 def cmd_fit_plate(args):
-    """Fit controls and pose to a plate, or to each frame of a video or a folder (a sequence)."""
+    """Fit controls and pose to a plate, or to each frame of a video, sequence or folder."""
     from .fit.calibrate import Calibration
-    from .pipeline import find_curves, model_kinds, open_clip
-    from .model.facemodel import FaceModel
-    from .pipeline.neutral import actor_identity, pick_neutral
-    from .pipeline.runs import read_run
-    from .report.runs import earlier_fits
+    from .pipeline import model_kinds, open_clip
+    from .pipeline.session import prepare_run, shot_frame
     security = None
     if args.scheduler:                 # refused before any work: a plain-TCP address beyond loopback
         from .pipeline.distributed import scheduler_security
@@ -377,64 +374,18 @@ def cmd_fit_plate(args):
     print(clip.describe(), flush=True)
     kinds = model_kinds(args.model_kind)
     out = Path(args.output) if args.output else Path("reports") / "fit-plate" / Path(args.plate).stem
-    run = {}
     identity = not args.no_identity
-    frame = pose = None
-    if not args.calib or identity:
-        if args.neutral_frame is not None:
-            numbers = [clip.numbers[i] for i in clip.indices]
-            if args.neutral_frame not in numbers:
-                raise InvfaceError(f"--neutral-frame {args.neutral_frame}: not among the selected frames "
-                                   f"({numbers[0]}..{numbers[-1]})")
-            pos = numbers.index(args.neutral_frame)
-            frame = next(clip.frames(pos, pos + 1))
-            run["calibration_why"] = "given with --neutral-frame"
-            curves, source = find_curves(model, frame.plate, args.curves, face=args.face, crop=len(clip) == 1)
-        elif len(clip) == 1:
-            frame = next(clip.frames())
-            curves, source = find_curves(model, frame.plate, args.curves, face=args.face, crop=len(clip) == 1)
-        else:
-            print("picking the most neutral-looking frame of the whole shot to calibrate on", flush=True)
-            whole = open_clip(args.plate, None, args.camera, args.colorspace)
-            frame, curves, source, pose, why = pick_neutral(model, whole, lam=args.curve_lambda, progress=_events,
-                                                            face=args.face)
-            run["calibration_why"] = why
-            print(f"calibrating on {frame.name}: {why}", flush=True)
-    before = {} if args.restart else read_run(out)
-    mine = {"identity_from": frame.digest if identity else None}
-    if not args.calib:
-        mine["calibrated_on"] = frame.digest
-    if earlier_fits(out) and any(before.get(k) != v for k, v in mine.items()) and not args.restart:
-        raise InvfaceError(f"{out}: holds an earlier run's fits; pass --restart to replace them, or "
-                           "choose another output folder")           # refused before any work is done
-    if identity:
-        actor = out / "actor.npz"
-        if actor.is_file() and before.get("identity_from") == frame.digest:
-            print(f"reusing {actor}: the actor's identity from {frame.name}, made by the run being resumed", flush=True)
-            run["identity"] = before.get("identity", "")
-        else:
-            print(f"the actor's identity from the curves of {frame.name}", flush=True)
-            adapted, fit = actor_identity(model, frame, curves, lam=args.curve_lambda, pose=pose, progress=_events)
-            out.mkdir(parents=True, exist_ok=True)
-            adapted.save(actor)
-            run["identity"] = (f"The model was adapted to the face of {frame.name} first ({fit.describe()}; "
-                               f"{actor.name})" if adapted is not model else
-                               f"The model is used as it is: the identity fit on {frame.name} moved it too far "
-                               f"({fit.describe()})")
-        model = FaceModel.load(actor)      # as a resumed run reads it: the same bytes, the same run hash
-        run["identity_from"] = frame.digest
-    if given is not None:
-        cal = given
-    else:
-        saved = out / "calib.npz"
-        if saved.is_file() and all(before.get(k) == v for k, v in mine.items()):
-            print(f"reusing {saved}: calibrated on {frame.name} by the run being resumed", flush=True)
-            cal = Calibration.load(saved, vertex_count=len(model.neutral))
-        else:
-            print(f"no --calib: calibrating light and albedo on {frame.name} (Eq. 14)", flush=True)
-            cal = _calibrate(model, frame.plate, saved, 30, curves=curves, source=source,
-                             lam_curves=args.curve_lambda)          # its warnings go into the fit's notes
-        run.update(calibrated_on=frame.digest, calibration_frame=frame.name)
+    shot = None
+    if given is None or identity:
+        whole = open_clip(args.plate, None, args.camera, args.colorspace) if len(clip) > 1 else clip
+        shot = shot_frame(model, clip, whole, args.neutral_frame, args.curves, args.face, args.curve_lambda,
+                          progress=_events)
+
+    def calibrate(model, plate, path, curves, source):          # with the bar; its warnings go to the notes
+        return _calibrate(model, plate, path, 30, curves=curves, source=source, lam_curves=args.curve_lambda)
+
+    model, cal, run = prepare_run(model, shot, out, given, identity, args.restart, args.curve_lambda, calibrate,
+                                  progress=_events)
     options = dict(iterations=args.iterations, shading=not args.no_shading, lam_curves=args.curve_lambda,
                    solver=args.solver, temporal=args.temporal, temporal_shading=args.temporal_shading)
     if args.face:
