@@ -8,7 +8,6 @@ import functools
 import json
 import math
 import os
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -292,7 +291,7 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
     keys for run.json (what the calibration was made from); exports: the formats written at the
     end (``pipeline.outputs.EXPORT_FORMATS``; the rigs from ``model``)."""
     from .pipeline import open_clip
-    from .pipeline.outputs import curve_rows, jitter, sequence_records
+    from .pipeline.outputs import sequence_summary
     from .pipeline.sequence import fit_sequence
     clip = open_clip(clip)
     bars = _FitBars()
@@ -332,21 +331,8 @@ def _fit_frames(model, clip, cal, kinds, out, options, curves=None, force=False,
         print(f"{len(skipped)} frame(s) finished before from the same inputs were skipped: "
               + ", ".join(skipped[:5]) + (" ..." if len(skipped) > 5 else ""))
     if len(clip) > 1:
-        for kind, recs in sequence_records(out, kinds).items():
-            if len(recs) >= 3:
-                print(f"{kind}: frame-to-frame jitter {jitter(curve_rows(recs)):.3f} (RMS second difference in "
-                      "units of 0.1 weight, 0.01 rad, 1 mm)")
-        fitted = len(rows) - len(skipped)
-        seconds = time.perf_counter() - started
-        if fitted and seconds > 0:
-            print(f"{fitted} frames fitted in {seconds:.0f} s: {60 * fitted / seconds:.1f} frames/min, "
-                  f"{seconds / fitted:.1f} s a frame ({', '.join(kinds)}; outputs and reports included)")
-        rms = [(k["curve_rms_px"], r["name"], kind) for r in rows for kind, k in r["kinds"].items()
-               if k.get("curve_rms_px") is not None]
-        if rms:
-            worst = max(rms)
-            print(f"curve RMS over {len(rows)} frames: median {statistics.median(v[0] for v in rms):.2f} px; "
-                  f"worst {worst[0]:.2f} px ({worst[1]}, {worst[2]})")
+        for line in sequence_summary(out, kinds, rows, len(rows) - len(skipped), time.perf_counter() - started):
+            print(line)
     if not any(r["kinds"] for r in rows):      # exit non-zero only when no frame has any kind at all
         first = rows[0] if rows else {}
         raise InvfaceError(first.get("error") or f"{first.get('name', clip.source)}: no model kind finished: "

@@ -272,6 +272,25 @@ def write_sequence_outputs(out, kinds, fps=0.0, exports=("csv", "usd"), usd_suff
     return paths
 
 
+def sequence_summary(out, kinds, rows, fitted, seconds):
+    """Lines that close a sequence's run: each kind's frame-to-frame jitter, the pace (frames
+    fitted in ``seconds``, per minute), and the curve RMS over the frames ``rows``
+    (``fit_frames``' summaries): median and worst."""
+    import statistics
+    lines = [f"{kind}: frame-to-frame jitter {jitter(curve_rows(recs)):.3f} (RMS second difference in units of "
+             "0.1 weight, 0.01 rad, 1 mm)" for kind, recs in sequence_records(out, kinds).items() if len(recs) >= 3]
+    if fitted and seconds > 0:
+        lines.append(f"{fitted} frames fitted in {seconds:.0f} s: {60 * fitted / seconds:.1f} frames/min, "
+                     f"{seconds / fitted:.1f} s a frame ({', '.join(kinds)}; outputs and reports included)")
+    rms = [(k["curve_rms_px"], r["name"], kind) for r in rows for kind, k in r["kinds"].items()
+           if k.get("curve_rms_px") is not None]
+    if rms:
+        worst = max(rms)
+        lines.append(f"curve RMS over {len(rows)} frames: median {statistics.median(v[0] for v in rms):.2f} px; "
+                     f"worst {worst[0]:.2f} px ({worst[1]}, {worst[2]})")
+    return lines
+
+
 EXPORT_FORMATS = ("csv", "usd", "usdskel", "gltf")
 
 
