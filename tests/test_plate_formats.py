@@ -169,3 +169,18 @@ def test_cli_colorspace_errors_are_one_line(tmp_path):
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "argument --colorspace: 'slog': unknown colour space" in run.stderr and "S-Log3" in run.stderr
     assert run.stderr.strip().splitlines()[-1].startswith("invface fit-plate: error: argument --colorspace")
+
+
+def test_without_openimageio_opencv_and_openexr_read_what_they_can(tmp_path, monkeypatch):
+    """The fallback readers (OpenImageIO not importable): PNG through OpenCV and EXR through
+    OpenEXR give the same linear pixels; DPX is refused with the package to install."""
+    truth = _linear()
+    write_image(tmp_path / "p.png", truth, bits=16)
+    write_image(tmp_path / "p.exr", truth)
+    _write(tmp_path / "p.dpx", colorspaces.from_linear(truth, "Cineon"), oiio.UINT16, {}, 10)
+    with_oiio = {ext: load_image(tmp_path / f"p{ext}").rgb for ext in (".png", ".exr")}
+    monkeypatch.setitem(sys.modules, "OpenImageIO", None)            # import OpenImageIO now fails
+    for ext, rgb in with_oiio.items():
+        np.testing.assert_allclose(load_image(tmp_path / f"p{ext}").rgb, rgb, atol=1e-6)
+    with pytest.raises(ImageError, match="p.dpx: reading '.dpx' files needs OpenImageIO"):
+        load_image(tmp_path / "p.dpx")
