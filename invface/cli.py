@@ -363,7 +363,8 @@ def cmd_fit_plate(args):
     identity = not args.no_identity
     shot = None
     if given is None or identity:
-        whole = open_clip(args.plate, None, args.camera, args.colorspace) if len(clip) > 1 else clip
+        over_shot = len(clip) > 1 and args.neutral_from == "shot"
+        whole = open_clip(args.plate, None, args.camera, args.colorspace) if over_shot else None
         shot = shot_frame(model, clip, whole, args.neutral_frame, args.curves, args.face, args.curve_lambda,
                           progress=_events)
 
@@ -629,7 +630,11 @@ def build_parser():
                          "default csv,usd; 'invface export' writes them later")
     fp.add_argument("--usd-ascii", action="store_true", help="write the USD files as text (.usda), not binary (.usd)")
     fp.add_argument("--neutral-frame", type=NON_NEGATIVE_INT, help="frame number to calibrate on when no --calib "
-                    "(default: the most neutral-looking of 8 frames spread over the selection)")
+                    "(default: the most neutral-looking of 8 frames spread over --neutral-from)")
+    fp.add_argument("--neutral-from", choices=["selection", "shot"], default="selection",
+                    help="where the calibration and identity frame is looked for: the frames --frames selects, or "
+                         "the whole shot (for a selection where something covers the face or the eyes are shut; "
+                         "a neutral frame from elsewhere can fit a selection of broad expressions worse)")
     fp.add_argument("--temporal", type=NON_NEGATIVE, default=TEMPORAL_LAMBDA,
                     help="weight of the temporal term between consecutive frames (px^2 per 0.1 weight, 0.01 rad "
                          f"or 1 mm; scaled with the face like lambda_1; default {TEMPORAL_LAMBDA:g}, 0 = off)")

@@ -203,7 +203,8 @@ def test_detector_tracks_the_real_clip_in_video_mode():
 
 
 def test_the_calibration_frame_is_the_most_neutral_of_the_whole_shot(small_expressive_model, clip):
-    """pick_neutral looks over the whole shot, not only the frames asked for: on the sample clip
+    """pick_neutral can look over the whole shot (fit-plate --neutral-from shot), not only the
+    frames asked for: on the sample clip
     (a smile and the jaw rising and falling over the 6 frames) it picks the first, neutral
     frame, though the frames asked for are the last three, and says why; a frame whose eyes the
     detector scores as shut costs EYES_SHUT_COST more."""
@@ -214,7 +215,7 @@ def test_the_calibration_frame_is_the_most_neutral_of_the_whole_shot(small_expre
     _, frames, _ = clip
     asked = open_clip(frames, "3:6")
     assert 0 not in asked.indices
-    frame, curves, source, pose, why = pick_neutral(m, open_clip(frames), candidates=6)
+    frame, curves, source, pose, why = pick_neutral(m, open_clip(frames), candidates=6, over="the whole shot")
     truth = [sum(w.values()) + 10 * jaw[0] for w, jaw, _, _ in clip_controls(m, N_FRAMES)]
     assert frame.index == int(np.argmin(truth)) == 0
     assert why.startswith("the most neutral-looking of 6 frames spread over the whole shot (expression")

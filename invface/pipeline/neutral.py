@@ -22,12 +22,13 @@ def neutral_score(pose, peer=None):
     return sum(parts.values()), parts
 
 
-def pick_neutral(model, clip, candidates=8, lam=None, progress=None, face=0):
+def pick_neutral(model, clip, candidates=8, lam=None, progress=None, face=0, over="the selected frames"):
     """The clip's most neutral-looking frame to calibrate on (Eq. 14 once per shot): among up
-    to ``candidates`` frames evenly spread over ``clip`` (the whole shot, not only the frames
-    asked for), the one of least ``neutral_score``: its curve fit's (Eq. 15, blendshape rig,
-    ``pose_from_curves``) expression and jaw, and its eyes shut. Returns (Frame, its curves,
-    their source, its PoseEstimate, a sentence saying why it was chosen)."""
+    to ``candidates`` frames evenly spread over ``clip`` (the frames asked for, or the whole
+    shot: ``over`` names which, for the sentence), the one of least ``neutral_score``: its
+    curve fit's (Eq. 15, blendshape rig, ``pose_from_curves``) expression and jaw, and its eyes
+    shut. Returns (Frame, its curves, their source, its PoseEstimate, a sentence saying why it
+    was chosen)."""
     from .plates import find_curves, pose_from_curves
     n = len(clip)
     positions = sorted({round(i * (n - 1) / max(candidates - 1, 1)) for i in range(min(candidates, n))})
@@ -50,7 +51,7 @@ def pick_neutral(model, clip, candidates=8, lam=None, progress=None, face=0):
         raise InvfaceError(f"{clip.source}: no face found in the {len(positions)} frames tried for the calibration; "
                            "pass --calib or --neutral-frame")
     score, frame, curves, source, pose, parts = best
-    why = (f"the most neutral-looking of {tried} frames spread over the whole shot (expression {score:.2f}: "
+    why = (f"the most neutral-looking of {tried} frames spread over {over} (expression {score:.2f}: "
            + ", ".join(f"{k} {v:.2f}" for k, v in parts.items()) + ")")
     return frame, curves, source, pose, why
 

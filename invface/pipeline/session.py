@@ -31,8 +31,9 @@ class ShotFrame:
 def shot_frame(model, clip, whole=None, neutral_frame=None, curves=None, face=0, lam=None, progress=None):
     """The frame that stands for the shot: the frame numbered ``neutral_frame`` among the
     clip's selected ones, the plate itself for a single plate, else the most neutral-looking of
-    ``whole`` (the whole shot; default the clip; ``neutral.pick_neutral``). curves: a curve
-    file for a single plate (``find_curves``). Returns a ShotFrame."""
+    ``whole`` (the whole shot) or, without it, of the clip's selected frames
+    (``neutral.pick_neutral``). curves: a curve file for a single plate (``find_curves``).
+    Returns a ShotFrame."""
     from .neutral import pick_neutral
     from .plates import find_curves
     if neutral_frame is not None:
@@ -48,8 +49,10 @@ def shot_frame(model, clip, whole=None, neutral_frame=None, curves=None, face=0,
         frame = next(clip.frames())
         found, source = find_curves(model, frame.plate, curves, face=face, crop=True)
         return ShotFrame(frame, found, source, None, "the plate itself")
-    _say(progress, message="picking the most neutral-looking frame of the whole shot to calibrate on")
-    frame, found, source, pose, why = pick_neutral(model, whole or clip, lam=lam, progress=progress, face=face)
+    over = "the whole shot" if whole is not None else "the selected frames"
+    _say(progress, message=f"picking the most neutral-looking frame of {over} to calibrate on")
+    frame, found, source, pose, why = pick_neutral(model, whole or clip, lam=lam, progress=progress, face=face,
+                                                   over=over)
     _say(progress, message=f"calibrating on {frame.name}: {why}")
     return ShotFrame(frame, found, source, pose, why)
 
