@@ -232,6 +232,8 @@ def cmd_calibrate(args):
     """Lighting and albedo calibration (Eq. 14) on a neutral plate."""
     from .pipeline import as_plate, find_curves
     _fresh_output(args.output, args.overwrite)
+    from .fit.calibrate import ROBUST_ROUNDS
+    robust = ROBUST_ROUNDS if args.robust else 0
     model = _load_model(args.model, args.resolution)
     plate = as_plate(args.plate, args.camera, args.colorspace)
     if args.auto_pose:
@@ -239,10 +241,9 @@ def cmd_calibrate(args):
             raise InvfaceError("give either --pose or --auto-pose, not both")
         curves, source = find_curves(model, plate, args.curves, crop=True)
         _calibrate(model, plate, args.output, args.max_iter, curves=curves, source=source, lam=args.lam,
-                   lam_curves=args.curve_lambda, robust=2 if args.robust else 0)
+                   lam_curves=args.curve_lambda, robust=robust)
     else:
-        _calibrate(model, plate, args.output, args.max_iter, pose=_pose(args.pose), lam=args.lam,
-                   robust=2 if args.robust else 0)
+        _calibrate(model, plate, args.output, args.max_iter, pose=_pose(args.pose), lam=args.lam, robust=robust)
     return 0
 
 

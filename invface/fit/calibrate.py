@@ -59,10 +59,10 @@ from ..sim.linsolve import MatrixPattern, make_solver
 from .lambdas import EQ14_LAMBDA
 
 UNSEEN_PULL = 1e-4                         # weight (x lambda) pulling unseen albedo to the mean
-# reweighted solves after the first (``robust_weights``; ``calibrate --robust``). Off by default:
-# on the real photos the features the first, stiff pass cannot explain (brows, lips) lost their
-# weight too, and the fits' curves and image residuals came out worse
-ROBUST_ROUNDS = 0
+# reweighted solves after the first (``robust_weights``) that ``calibrate --robust`` asks for.
+# ``calibrate``'s default is none: on the real photos the features the first, stiff pass cannot
+# explain (brows, lips) lost their weight too, and the fits' curves and image residuals came out worse
+ROBUST_ROUNDS = 2
 ROBUST_K = 1.5
 ROBUST_STIFF = 50.0
 SKIN_ALBEDO = shading.SKIN_ALBEDO           # default mean albedo (the gauge)
@@ -191,7 +191,7 @@ def robust_weights(residual, k=ROBUST_K):
 
 def calibrate(model_triangles, x, plate_image, camera, rotation=None, translation=None,
               lam=EQ14_LAMBDA, albedo_mean=SKIN_ALBEDO, mask=None, max_iter=30, tol=1e-7,
-              gamma0=None, albedo0=None, samples=3, progress=None, parts=None, parts_x=None, robust=ROBUST_ROUNDS):
+              gamma0=None, albedo0=None, samples=3, progress=None, parts=None, parts_x=None, robust=0):
     """Solve Eq. 14 for gamma (9,3) and albedo (V,3) on one plate.
 
     model_triangles (F,3); x (V,3) m: the neutral surface; plate_image (H,W,3) linear;

@@ -35,12 +35,21 @@ def linear_to_srgb(a):
     return colorspaces.from_linear(a, colorspaces.SRGB)
 
 
-def _check_complete(path, data):
-    """Truncated PNG/JPEG files still half-decode; check their end markers."""
+def _check_complete(path, tail=65536):
+    """Truncated PNG/JPEG files still half-decode; check their start and end markers. Only the
+    file's first bytes and last ``tail`` bytes are read (all of it when those are zero padding):
+    the decoder reads the file itself."""
     ext = path.suffix.lower()
-    if ext == ".png" and (data[:8] != b"\x89PNG\r\n\x1a\n" or b"IEND" not in data[-64:]):
+    with open(path, "rb") as f:
+        head = f.read(8)
+        f.seek(max(f.seek(0, 2) - tail, 0))
+        end = f.read()
+        if not end.strip(b"\0"):
+            f.seek(0)
+            end = f.read()
+    if ext == ".png" and (head != b"\x89PNG\r\n\x1a\n" or b"IEND" not in end[-64:]):
         raise ImageError(f"{path}: not a complete PNG file (truncated or corrupted)")
-    if ext in (".jpg", ".jpeg") and (data[:2] != b"\xff\xd8" or b"\xff\xd9" not in data.rstrip(b"\0")[-16:]):
+    if ext in (".jpg", ".jpeg") and (head[:2] != b"\xff\xd8" or b"\xff\xd9" not in end.rstrip(b"\0")[-16:]):
         raise ImageError(f"{path}: not a complete JPEG file (truncated or corrupted)")
 
 
@@ -120,7 +129,7 @@ def decode_image(path):
     if not path.is_file():
         raise ImageError(f"{path}: image file not found")
     if ext in SRGB_EXTS:
-        _check_complete(path, path.read_bytes())
+        _check_complete(path)
     try:
         import OpenImageIO as oiio
     except ImportError:

@@ -294,6 +294,11 @@ def sequence_summary(out, kinds, rows, fitted, seconds):
 EXPORT_FORMATS = ("csv", "usd", "usdskel", "gltf")
 
 
+def usd_suffix(usd_ascii):
+    """The USD files' suffix: ".usda" (text) with ``usd_ascii``, else ".usd" (binary crate)."""
+    return ".usda" if usd_ascii else ".usd"
+
+
 def export(run_dir, formats=("csv",), fps=None, model=None, usd_ascii=False):
     """Write an existing fit run's exports into its folder: "csv" is the Live Link Face CSV per
     kind (``write_arkit_csv``: arkit_<kind>.csv), "usd" the take as a USD stage per kind
@@ -321,7 +326,7 @@ def export(run_dir, formats=("csv",), fps=None, model=None, usd_ascii=False):
                            "<frame>/<kind>/fit.json): give a fit-plate output folder")
     rate = fps or record.get("fps") or 24.0
     paths = write_arkit_csv(run, kinds, rate, single=bool(single)) if "csv" in formats else []
-    usd = ".usda" if usd_ascii else ".usd"
+    usd = usd_suffix(usd_ascii)
     paths += write_usd_takes(run, kinds, rate, single=bool(single), suffix=usd) if "usd" in formats else []
     rigs = [(f, suffix) for f, suffix in (("usdskel", usd), ("gltf", ".glb")) if f in formats]
     model = run_model(run, model) if rigs else None

@@ -20,7 +20,7 @@ from ..fit.lambdas import EQ16_TEMPORAL, TEMPORAL_LAMBDA
 from .clips import open_clip
 from .distributed import fit_sequence_distributed
 from .frames import fit_frames
-from .outputs import write_arkit_csv, write_sequence_outputs, write_usd_takes
+from .outputs import usd_suffix, write_arkit_csv, write_sequence_outputs, write_usd_takes
 from .plates import _say, model_kinds
 from .runs import finish_run, run_hash, start_run
 
@@ -66,7 +66,7 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
         finish_run(out)
         if len(clip) > 1:
             paths = write_sequence_outputs(out, kinds, fps=clip.fps, exports=exports,
-                                           usd_suffix=".usda" if usd_ascii else ".usd")
+                                           usd_suffix=usd_suffix(usd_ascii))
             named = lambda test: ", ".join(str(p) for p in paths if test(p.name))
             _say(progress, message="animation curves: " + named(lambda n: n.startswith("curves.")))
             if "csv" in exports:
@@ -80,7 +80,7 @@ def fit_sequence(model, frames, calibration, out=None, kinds=("blendshape",), cu
         else:
             for p in write_arkit_csv(out, kinds, clip.fps or 24.0, single=True) if "csv" in exports else []:
                 _say(progress, message=f"ARKit controls (Live Link Face CSV): {p}")
-            usd = ".usda" if usd_ascii else ".usd"
+            usd = usd_suffix(usd_ascii)
             for p in write_usd_takes(out, kinds, clip.fps or 24.0, single=True, suffix=usd) if "usd" in exports else []:
                 _say(progress, message=f"the fit as USD (mesh, camera, ARKit controls, plate card): {p}")
     return rows
