@@ -77,6 +77,15 @@ CASES = {
     "export of a folder with no fit": ({}, ["export", "out"], "out"),
     "export in an unknown format": ({"out/blendshape/fit.json": lambda p: p.write_text("{}")},
                                     ["export", "out", "--format", "fbx"], "fbx"),
+    # plates as VFX delivers them
+    "a sequence pattern that matches no file": ({}, ["fit-plate", "shot.####.exr", "-o", "out"], "shot.####.exr"),
+    "a DPX that is not one": ({"p.dpx": lambda p: p.write_bytes(b"not a dpx file")}, ["fit-plate", "p.dpx", "-o", "out"],
+                              "p.dpx"),
+    "--frames beyond the sequence's numbers": ({"seq/shot.0001.png": _plate, "seq/shot.0002.png": _plate},
+                                               ["fit-plate", "seq/shot.####.png", "--frames", "5-9", "-o", "out"],
+                                               "--frames 5-9"),
+    "an unknown --colorspace": ({"plate.png": _plate}, ["fit-plate", "plate.png", "--colorspace", "nope", "-o", "out"],
+                                "--colorspace"),
     # an existing output is refused unless --overwrite, the same way by every verb, before any work
     "calibrate onto an existing calibration": ({"plate.png": _plate, "out/calib.npz": lambda p: p.write_bytes(b"x")},
                                                ["calibrate", "plate.png", "-o", "out/calib.npz"],
