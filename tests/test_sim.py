@@ -186,25 +186,30 @@ def test_centerline_length_and_activation_curve(small_model):
     assert mus.activation(1.2 * L0) == 0.0
 
 
-def test_activation_derivative_at_rest_is_the_one_into_the_box(small_expressive_model):
-    """Every muscle sits on its activation curve's break at rest (a = 0 for s >= 1). The
-    activation's derivative in each weight at 0 is the forward difference, into the box:
-    a shape that shortens a muscle activates it (the lengthening side's slope, 0, gave the
-    adjoint a 7.8 % error on browOuterUp_R at weight 0 on the default head)."""
+def test_activation_derivative_is_the_one_into_the_box(small_expressive_model):
+    """The activation Jacobian in the weights is the forward difference, into the box: at rest,
+    where a muscle with no slack sits on its curve's break (the lengthening side's slope, 0,
+    gave the adjoint a 7.8 % error on browOuterUp_R at weight 0 on the default head), and
+    at a smile, where muscles sit on their ramps."""
     from invface.model.rig import jaw_transform_derivatives
     from invface.sim.driven import DrivenSimulation
     m = small_expressive_model
     ds = DrivenSimulation(m, contact=False)
     p = np.zeros(len(ds.parameter_names))
-    b, jaw = ds.split(p)
+    b0, jaw = ds.split(p)
     jm = m.jaw_matrix(jaw)
-    st = ds.tracks.evaluate(b, jm)
-    da = ds.tracks.activation_jacobian(st, jm, jaw_transform_derivatives(jaw, m.jaw_pivot, m.jaw_frame))
+    smile = b0.copy()
+    smile[[m.blendshape_names.index(n) for n in ("mouthSmileLeft", "mouthSmileRight")]] = 0.7
     h = 1e-6
-    fwd = np.stack([(ds.tracks.evaluate(b + h * e, jm).activations - st.activations) / h
-                    for e in np.eye(len(b))], 1)
-    assert np.abs(fwd).max() > 0.5                       # some shapes do activate muscles
-    assert np.allclose(da[:, :ds.n_blendshapes], fwd, rtol=1e-4, atol=1e-6 * np.abs(fwd).max())
+    for b in (b0, smile):
+        st = ds.tracks.evaluate(b, jm)
+        da = ds.tracks.activation_jacobian(st, jm, jaw_transform_derivatives(jaw, m.jaw_pivot, m.jaw_frame))
+        fwd = np.stack([(ds.tracks.evaluate(b + h * e, jm).activations - st.activations) / h
+                        for e in np.eye(len(b))], 1)
+        assert np.abs(fwd).max() > 0.5                       # some shapes do activate muscles
+        assert np.allclose(da[:, :ds.n_blendshapes], fwd, rtol=1e-4, atol=1e-6 * np.abs(fwd).max())
+    assert ds.tracks.evaluate(smile, jm).activations[[i for i, mu in enumerate(m.muscles)
+                                                      if mu.name.startswith("zygomaticus_major")]].min() > 0.2
 
 
 @pytest.fixture(scope="module")

@@ -129,34 +129,57 @@ def simulate_blendshapes(model, units=None, progress=None):
     return model
 
 
-def calibrate_activation_curves(model, min_activation=0.2):
-    """Fit each muscle's activation-length curve to the template's own expressions (in place).
+SLACK_MAX = 0.3       # the largest slack (centre-line shortening with no activation) tried
+MIN_RAMP = 0.04       # the least shortening between activation 0 and 1: da/dL <= 1 / (MIN_RAMP L0)
+GRID_STEP = 0.0025    # the grid of slacks and full-activation shortenings
 
-    For every shape that activated muscle m with a >= min_activation, the blendshape-driven
-    centre-line (Eq. 8 with that shape at weight 1 and its jaw) shortens to L/L0 = s; the
-    curve a = clip(c (1 - s), 0, 1) with the least-squares slope c over those shapes makes
-    the driven simulation recover the activations that made the shapes. Muscles that no shape
-    shortens keep their curve. Needs model.track_displacements. Returns the slopes (M,).
+
+def activation_ramp(strain, targets, min_ramp=MIN_RAMP):
+    """The ramp a = clip((e - e0) / (e1 - e0), 0, 1) of centre-line shortening e = 1 - L/L0
+    that fits ``targets`` best in least squares: strain and targets (N,) over N samples.
+    Returns (e0, e1): the slack e0, up to which the muscle stays passive, and the shortening e1
+    of full activation, e1 - e0 >= min_ramp."""
+    e0 = np.arange(0.0, SLACK_MAX + 1e-9, GRID_STEP)
+    width = np.arange(min_ramp, min_ramp + SLACK_MAX + 1e-9, GRID_STEP)
+    a = np.clip((strain[None, None, :] - e0[:, None, None]) / width[None, :, None], 0, 1)
+    sse = ((a - targets) ** 2).sum(-1)
+    i, j = np.unravel_index(np.argmin(sse), sse.shape)      # the first minimum: least slack
+    return float(e0[i]), float(e0[i] + width[j])
+
+
+LEVELS = (0.25, 0.5, 0.75, 1.0)    # the weights each shape is calibrated at
+
+
+def calibrate_activation_curves(model, levels=LEVELS):
+    """Fit each muscle's activation-length curve (Eq. 9) to the model's own shapes (in place).
+
+    Each shape k at weight w in ``levels``, with w times its jaw (Eq. 8), shortens muscle m's
+    centre line to L/L0 = 1 - e, and is taken to engage m at w A_km (A:
+    ``model.blendshape_activations``, what made the shape or what it is taken to engage). The
+    curve is the ramp of ``activation_ramp`` fitted to those pairs over every shape, the shapes
+    that do not engage m included: a muscle carried along by its neighbours in another shape
+    stays passive up to its slack, so a fit's activations name the muscles that make the
+    expression, as paper 000's Fig. 6 reads them. A muscle that no shape engages gets a slack
+    beyond every shape's shortening. Needs model.track_displacements. Returns the slacks (M,).
     """
     from ..sim.tracks import MuscleTracks
 
     tr = MuscleTracks(model, model.track_displacements, np.ones(len(model.rest_positions), bool), 1.0)
     jaws = model.meta.get("blendshape_jaw", {})
     K = len(model.blendshape_names)
-    strain = np.zeros((K, len(model.muscles)))
+    L0 = np.array([m.rest_length for m in model.muscles])
+    strain, target = [], []
     for k, name in enumerate(model.blendshape_names):
-        b = np.zeros(K)
-        b[k] = 1.0
-        st = tr.evaluate(b, model.jaw_matrix(np.asarray(jaws.get(name, np.zeros(6)), float)))
-        strain[k] = 1 - st.lengths / np.array([m.rest_length for m in model.muscles])
-    slopes = np.full(len(model.muscles), np.nan)
+        jaw = np.asarray(jaws.get(name, np.zeros(6)), float)
+        for w in levels:
+            b = np.zeros(K)
+            b[k] = w
+            strain.append(1 - tr.evaluate(b, model.jaw_matrix(w * jaw)).lengths / L0)
+            target.append(w * model.blendshape_activations[k])
+    strain, target = np.array(strain), np.array(target)
+    slacks = np.zeros(len(model.muscles))
     for i, m in enumerate(model.muscles):
-        a = model.blendshape_activations[:, i]
-        use = (a >= min_activation) & (strain[:, i] > 0.01)
-        if not use.any():
-            continue
-        c = float(a[use] @ strain[use, i] / (strain[use, i] @ strain[use, i]))
-        slopes[i] = c
-        s_full = 1 - 1 / c                       # L/L0 at full activation
-        m.activation_curve = np.array([[min(s_full, 0.9), 1.0], [1.0, 0.0], [1.5, 0.0]])
-    return slopes
+        e0, e1 = activation_ramp(strain[:, i], target[:, i])
+        slacks[i] = e0
+        m.activation_curve = np.array([[1 - e1, 1.0], [1 - e0, 0.0], [1.5, 0.0]])
+    return slacks
