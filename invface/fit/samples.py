@@ -38,10 +38,27 @@ def sample_camera(width=720, height=540):
 
 def write_sample_plates(model, folder, names=None, size=(720, 540), noise=0.005, curve_noise=0.3,
                         progress=None):
-    """Render the SAMPLES into ``folder``: NAME.png (sRGB 8-bit), NAME.json (camera),
-    NAME.truth.json (the controls, pose and model kind that made it) and NAME.curves.json
-    (the model's plate curves projected from the truth, with ``curve_noise`` px of noise).
-    Deterministic. Returns the plate paths."""
+    """Render the SAMPLES into ``folder`` with ``write_plate``. Deterministic. Returns the
+    plate paths."""
+    out = []
+    for i, name in enumerate(names or SAMPLES):
+        kind, weights, jaw, rot, tr = SAMPLES[name]
+        if progress:
+            progress(f"plate {name} ({kind} model)")
+        out.append(write_plate(model, folder, name, kind, {"weights": weights, "jaw": jaw}, rot, tr, seed=i,
+                               size=size, noise=noise, curve_noise=curve_noise))
+    return out
+
+
+def write_plate(model, folder, name, kind, controls, rotation, translation, seed=0, size=(720, 540),
+                noise=0.005, curve_noise=0.3):
+    """Render ``model``'s ``kind`` surface at ``controls`` ({"weights": {name: w}, "jaw": (6,)
+    rad/m or None}), posed by ``rotation`` (3,) rad and ``translation`` (3,) m, through
+    ``sample_camera`` into ``folder``: NAME.png (sRGB 8-bit, with ``noise`` of Gaussian noise),
+    NAME.json (camera), NAME.truth.json (the controls, pose and model kind that made it) and
+    NAME.curves.json (the model's plate curves projected from the truth, with ``curve_noise``
+    px of noise). Studio light, the model's skin albedo. Deterministic in ``seed``. Returns the
+    plate's path."""
     from pathlib import Path
 
     from ..io.images import write_image
@@ -50,30 +67,23 @@ def write_sample_plates(model, folder, names=None, size=(720, 540), noise=0.005,
     from ..model.pose import pose_points
     folder = Path(folder)
     cam = sample_camera(*size)
-    gamma, albedo = studio_light(), skin_albedo(model)
-    vec = FitVector.of(model)
-    out = []
-    for i, name in enumerate(names or SAMPLES):
-        kind, weights, jaw, rot, tr = SAMPLES[name]
-        if progress:
-            progress(f"plate {name} ({kind} model)")
-        p = model.parameters({"weights": weights, "jaw": np.zeros(6) if jaw is None else jaw})
-        x = model.surface_model(kind).surface(p)
-        image, _ = render_plate(model, x, cam, gamma, albedo, rot, tr, noise=noise, seed=i,
-                                parts_x=model.parts_positions(p))
-        path = write_image(folder / f"{name}.png", image)
-        cam.save(folder / f"{name}.json")
-        truth = {"kind": kind, "weights": weights, "jaw": p[vec.jaw].tolist(), "rotation": list(rot),
-                 "translation": list(tr), "light": "studio_light()", "albedo": "skin_albedo(model, seed=0)",
-                 "noise": noise}
-        write_object(folder / f"{name}.truth.json", truth)
-        xr = pose_points(x, rot, tr)
-        rng = np.random.default_rng(100 + i)
-        curves = {c: projection_jacobian(cam, curve_points(model, c, xr))[0] for c in PLATE_CURVES}
-        curves = {c: v + rng.normal(0, curve_noise, v.shape) for c, v in curves.items()}
-        write_curves(folder / f"{name}.curves.json", curves, image_size=cam.size)
-        out.append(path)
-    return out
+    weights, jaw = controls["weights"], controls.get("jaw")
+    p = model.parameters({"weights": weights, "jaw": np.zeros(6) if jaw is None else jaw})
+    x = model.surface_model(kind).surface(p)
+    image, _ = render_plate(model, x, cam, studio_light(), skin_albedo(model), rotation, translation, noise=noise,
+                            seed=seed, parts_x=model.parts_positions(p))
+    path = write_image(folder / f"{name}.png", image)
+    cam.save(folder / f"{name}.json")
+    truth = {"kind": kind, "weights": weights, "jaw": p[FitVector.of(model).jaw].tolist(),
+             "rotation": list(rotation), "translation": list(translation), "light": "studio_light()",
+             "albedo": "skin_albedo(model, seed=0)", "noise": noise}
+    write_object(folder / f"{name}.truth.json", truth)
+    xr = pose_points(x, rotation, translation)
+    rng = np.random.default_rng(100 + seed)
+    curves = {c: projection_jacobian(cam, curve_points(model, c, xr))[0] for c in PLATE_CURVES}
+    curves = {c: v + rng.normal(0, curve_noise, v.shape) for c, v in curves.items()}
+    write_curves(folder / f"{name}.curves.json", curves, image_size=cam.size)
+    return path
 
 
 def clip_controls(model, n, fps=24.0):
