@@ -53,14 +53,61 @@ def test_identity_from_one_frame_carries_to_other_expressions(small_expressive_m
 
 def test_identity_finds_the_face_proportions(small_expressive_model):
     """A wider, shorter face (width x1.06, height x0.95, depth their geometric mean): the
-    proportions stage recovers both scales, and the field left after them stays small."""
+    proportions recover both scales, and the field left after them stays small (without the
+    face-shape space, whose shapes also widen a face)."""
     m = small_expressive_model
     cam = Camera.front_view(360, 270)
     p = np.zeros(FitVector.of(m).P)
     s = np.array([1.06, 0.95, np.sqrt(1.06 * 0.95)])
     c = m.neutral[np.concatenate([m.curves[k] for k in m.curves])].mean(0)
     truth = _with_neutral(m, c + (m.neutral - c) * s)
-    fit = fit_identity(m, cam, _curves(truth, cam, p), p, ROT, TR)
+    fit = fit_identity(m, cam, _curves(truth, cam, p), p, ROT, TR, space=False)   # the space takes a share of a width
     assert np.abs(np.exp(fit.proportions[:2]) - s[:2]).max() < 0.01, fit.proportions
     assert fit.rms_after < 0.2 * fit.rms_before
     assert fit.max_mm < 1.0, fit.max_mm
+
+
+def test_face_shape_space_jacobian_matches_finite_differences(small_expressive_model):
+    """d r / d c of the curve residuals against the space's shapes (carried onto the small
+    head by closest point) equals central differences of the residuals."""
+    from invface.fit.curves import CurveObjective
+    from invface.fit.identity import curve_data, space_jacobian
+    from invface.template.identity_space import identity_shapes
+    m = small_expressive_model
+    S = identity_shapes(m)
+    assert S.shape == (20, len(m.neutral), 3) and np.abs(S).max() > 0.003
+    cam = Camera.front_view(360, 270)
+    p = np.zeros(FitVector.of(m).P)
+    truth = _with_neutral(m, m.neutral + 1.5 * S[0] - S[3])
+    sm = m.surface_model("blendshape")
+    obj = CurveObjective(m, sm, cam, _curves(truth, cam, p), 0.0)
+    data = curve_data(sm.surface(p), ROT, TR)
+    c = np.array([0.3, -0.2] + [0.0] * 18)
+    d0 = np.tensordot(c, S, axes=1)
+    r, _, blocks = data(d0, (obj, 1.0))
+    J = space_jacobian(blocks, S)
+    h = 1e-4
+    for k in (0, 3, 11):
+        fd = (data(d0 + h * S[k], (obj, 1.0))[0] - data(d0 - h * S[k], (obj, 1.0))[0]) / (2 * h)
+        assert np.allclose(J[:, k], fd, rtol=1e-3, atol=1e-4 * np.abs(fd).max()), k
+
+
+def test_identity_in_the_space_recovers_a_known_face_in_3d(small_expressive_model):
+    """A face of the space (coefficients 1.5 sd on four shapes, depth included), seen from the
+    front: the fitted head is nearer the true face in 3D than the template, depth included,
+    which the field alone cannot see."""
+    from invface.template.identity_space import identity_shapes
+    m = small_expressive_model
+    S = identity_shapes(m)
+    cam = Camera.front_view(360, 270)
+    p = np.zeros(FitVector.of(m).P)
+    c = np.zeros(20)
+    c[[0, 1, 3, 5]] = [1.5, -1.5, 1.5, -1.5]
+    truth = _with_neutral(m, m.neutral + np.tensordot(c, S, axes=1))
+    curves = _curves(truth, cam, p)
+    err = lambda d: np.median(np.linalg.norm(m.neutral + d - truth.neutral, axis=1))     # noqa: E731
+    with_space = fit_identity(m, cam, curves, p, ROT, TR)
+    without = fit_identity(m, cam, curves, p, ROT, TR, space=False)
+    assert err(with_space.displacement) < 0.5 * err(0.0), (err(with_space.displacement), err(0.0))
+    assert err(with_space.displacement) < 0.8 * err(without.displacement)
+    assert np.corrcoef(with_space.coefficients, c)[0, 1] > 0.7, with_space.coefficients.round(2)

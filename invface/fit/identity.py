@@ -16,7 +16,12 @@ smooth over ``IDENTITY_LENGTH`` and cannot copy the frame's pixel noise into the
 small eps term keeps the field near zero where no curve is (the depth along the view is only
 known through the smoothness). Gauss-Newton on the foot points, each step one sparse solve.
 
-Before the field, the head's proportions, smooth over the whole head (paper 001 morphs a
+Before the field, the neutral moves in a face-shape space, where the model has one
+(``template.identity_space``: ICT-FaceKit's 20 identity shapes S_i, in standard deviations), by
+sum_i c_i S_i under the Gaussian prior |c|^2 n IDENTITY_PRIOR_PX^2 (n residuals: a coefficient at
+1 sd costs as much as all the curves at that RMS). From one frontal view the curves see no
+depth; the space moves the depth with the outline as real faces do. It is fitted jointly with
+the head's proportions, smooth over the whole head (paper 001 morphs a
 template onto a face the same way, global shape first): the neutral about the curves' centre
 c, with y = (Y - c_y) / 0.1 m,
 
@@ -34,7 +39,7 @@ not fitted this costs 0.06 px against full weight; on 0-f15-hao it leaves the lu
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -51,6 +56,7 @@ IDENTITY_ANCHOR = 0.06      # m: beyond this from the curves the field fades to 
 IDENTITY_MAX_MM = 20.0      # a larger field (after the proportions) is not an identity: not applied (wrong frame or
                             # curves); on the real photos the fields reach 7-12 mm
 IDENTITY_MAX_SCALE = 0.15   # the proportions' prior: each parameter's +- this costs as much as the curves at 1 px
+IDENTITY_PRIOR_PX = 0.15    # the shape space's prior: a coefficient at 1 sd costs as much as the curves at this RMS
 SILHOUETTES = ("jaw_line",)  # outline curves: they steer the proportions, and the field only weakly,
 SILHOUETTE_WEIGHT = 0.3      # with this weight on their squared residuals
 
@@ -60,18 +66,44 @@ class IdentityFit:
     """displacement (V,3) m of the neutral (the proportions' scale and the field together);
     rms_before / rms_after px of all the curves on the fitting frame; proportions (4,): (a, b,
     t, v) of the module's docstring; max_mm: the field's largest vertex displacement beyond
-    the proportions."""
+    the proportions; coefficients (K,): the face-shape space's (``template.identity_space``), in
+    standard deviations (empty where the model has no space)."""
     displacement: np.ndarray
     rms_before: float
     rms_after: float
     max_mm: float
     proportions: np.ndarray
+    coefficients: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def describe(self):
         a, b = self.proportions[:2]
+        space = (f"the face-shape space at {np.linalg.norm(self.coefficients):.2f} sd "
+                 f"(largest c{int(np.argmax(np.abs(self.coefficients)))} "
+                 f"{self.coefficients[np.argmax(np.abs(self.coefficients))]:+.2f}), "
+                 if len(self.coefficients) else "")
         return (f"identity from the curves: curve RMS {self.rms_before:.2f} -> {self.rms_after:.2f} px on the "
-                f"fitting frame; face width x{np.exp(a):.3f}, height x{np.exp(b):.3f}, then moved up to "
+                f"fitting frame; {space}face width x{np.exp(a):.3f}, height x{np.exp(b):.3f}, then moved up to "
                 f"{self.max_mm:.1f} mm")
+
+
+def curve_data(x, rotation, translation):
+    """The curve term of the surface x (V,3) m posed by rotation (3,) rad and translation (3,) m,
+    as a function ``data(d, *objs)`` of a neutral correction d (V,3) m (posed with the head), objs:
+    (CurveObjective, weight) pairs: (signed distances (n,) px, their gradient (V,3) of 1/2 |r|^2,
+    per curve (vertex ids (m,), d r / d d (n_b,m,3)), in the order of the rows)."""
+    R = euler_xyz(np.asarray(rotation, float))
+
+    def data(d, *objs):
+        xr = pose_points(x + d, rotation, translation)
+        rows, g, blocks = [np.zeros(0)], np.zeros(x.shape), []
+        for obj, w in objs:
+            for vid, r, dr_dx in obj.signed(xr):
+                r, a = np.sqrt(w) * r, np.sqrt(w) * dr_dx @ R
+                np.add.at(g, vid, np.einsum("n,nmi->mi", r, a))
+                rows.append(r)
+                blocks.append((vid, a))
+        return np.concatenate(rows), g, blocks
+    return data
 
 
 def _operators(model):
@@ -82,10 +114,11 @@ def _operators(model):
 
 
 def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, length=IDENTITY_LENGTH,
-                 silhouette=SILHOUETTE_WEIGHT):
+                 silhouette=SILHOUETTE_WEIGHT, space=True):
     """Smooth neutral correction (IdentityFit) so that the model at controls p (P,), posed by
     rotation (3,) rad and translation (3,) m, meets the plate curves {name: (n,2) px} seen by
-    ``camera``: the proportions, then the field. The weight mu of the field's bi-Laplacian is
+    ``camera``: the face-shape space (where the model has one, ``template.identity_space``, and
+    ``space``) with the proportions, then the field. The weight mu of the field's bi-Laplacian is
     set so that a correction of width ``length`` (m) costs as much as a pixel at each of the
     vertices of a curve across it: mu = (k length)^2 n_per_length, with k the camera's px per
     metre at the face; ``silhouette``: the weight of the outline curves (``SILHOUETTES``) in
@@ -97,26 +130,15 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
         raise InvfaceError("identity: none of the plate curves is a model curve")
     every = ((inner, 1.0), (outline, 1.0))          # all curves at full weight: the proportions and the RMS
     x = sm.surface(np.asarray(p, float))
-    R = euler_xyz(np.asarray(rotation, float))
     V = len(x)
-
-    def data(d, *objs):
-        """Signed distances (n,) px, their gradient (V,3) of 1/2 |r|^2 and per curve (vertex ids (m,),
-        d r / d d (n,m,3)) of the model displaced by d (V,3) m; objs: (CurveObjective, weight) pairs."""
-        xr = pose_points(x + d, rotation, translation)
-        rows, g, blocks = [np.zeros(0)], np.zeros((V, 3)), []
-        for obj, w in objs:
-            for vid, r, dr_dx in obj.signed(xr):
-                r, a = np.sqrt(w) * r, np.sqrt(w) * dr_dx @ R       # the correction is posed with the head
-                np.add.at(g, vid, np.einsum("n,nmi->mi", r, a))
-                rows.append(r)
-                blocks.append((vid, a))
-        return np.concatenate(rows), g, blocks
+    data = curve_data(x, rotation, translation)
 
     n0 = np.asarray(model.neutral, float)
     r0 = data(0.0, *every)[0]
     c = n0[np.concatenate([v for obj, _ in every for v in obj.vertices.values()])].mean(0)
-    D, q = _proportions(n0, c, lambda d: data(d, *every)[0])
+    from ..template.identity_space import identity_shapes
+    S = identity_shapes(model) if space else None
+    D, q, coef = _global_shape(n0, c, np.zeros((0, V, 3)) if S is None else S, lambda d: data(d, *every))
     d = np.zeros((V, 3))
     field_terms = ((inner, 1.0), (outline, silhouette))
     if inner.curves:
@@ -145,30 +167,58 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
                 break
     rms = lambda r: rms_px({"all": r})         # noqa: E731
     return IdentityFit(D + d, rms(r0), rms(data(D + d, *every)[0]),
-                       float(np.linalg.norm(d, axis=1).max() * 1e3), q)
+                       float(np.linalg.norm(d, axis=1).max() * 1e3), q, coef)
 
 
-def _proportions(x, c, residuals, iterations=10, step=1e-4):
-    """The proportions of the module's docstring for the neutral x (V,3) m about c (3,): (their
-    displacement (V,3) m, the parameters (4,)). Gauss-Newton on ``residuals(d)`` (px, of a
-    displacement d (V,3)) with a finite-difference Jacobian and the prior
-    |q|^2 n / ln(1 + IDENTITY_MAX_SCALE)^2 (n residuals)."""
+def _global_shape(x, c, S, data, iterations=10, step=1e-4):
+    """The face-shape space's coefficients and the proportions (module docstring) for the neutral
+    x (V,3) m about c (3,), jointly: (their displacement (V,3) m, the proportions (4,), the
+    coefficients (K,)). S (K,V,3) m: the space's shapes (K may be 0); ``data(d)``: the curves'
+    (residuals (n,) px, gradient, blocks (vertex ids (m,), d r / d d (n_b,m,3))) of a
+    displacement d (V,3). Gauss-Newton with the coefficients' Jacobian from the blocks and the
+    proportions' by finite differences; the priors cost |c|^2 n IDENTITY_PRIOR_PX^2 (a
+    Gaussian, the shapes being in standard deviations) and |q|^2 n / ln(1 + IDENTITY_MAX_SCALE)^2
+    (n residuals)."""
+    K = len(S)
+    theta = np.zeros(K + 4)
+    proportions = _proportion_field(x, c)
+
+    def displacement(t):
+        return np.tensordot(t[:K], S, axes=1) + proportions(t[K:])
+
+    r, _, blocks = data(displacement(theta))
+    prior = len(r) * np.concatenate([np.full(K, IDENTITY_PRIOR_PX ** 2),
+                                     np.full(4, 1 / np.log1p(IDENTITY_MAX_SCALE) ** 2)])
+    for _ in range(iterations):
+        J = np.zeros((len(r), K + 4))
+        if K:
+            J[:, :K] = space_jacobian(blocks, S)
+        for j in range(4):
+            t = theta.copy()
+            t[K + j] += step
+            J[:, K + j] = (data(displacement(t))[0] - r) / step
+        dt = np.linalg.solve(J.T @ J + np.diag(prior), -(J.T @ r + prior * theta))
+        theta = theta + dt
+        r, _, blocks = data(displacement(theta))
+        if np.abs(dt).max() < 1e-6:
+            break
+    return displacement(theta), theta[K:], theta[:K]
+
+
+def space_jacobian(blocks, S):
+    """d r / d c (n,K) px per sd: the curve residuals' blocks (vertex ids (m,), d r / d d
+    (n_b,m,3)), in the order of their rows, against the shapes S (K,V,3) m."""
+    return np.concatenate([np.einsum("nmj,kmj->nk", a, S[:, vid]) for vid, a in blocks])
+
+
+def _proportion_field(x, c):
+    """The proportions' displacement (V,3) m of the neutral x (V,3) m about c (3,) as a
+    function of (a, b, t, v) (module docstring)."""
     u = x - c
     y = u[:, 1] / 0.1
 
-    def field(q):
+    def displacement(q):
         a, b, t, v = q
         return np.stack([u[:, 0] * np.exp(a) * (1 + t * y), u[:, 1] * np.exp(b) * (1 + v * y),
                          u[:, 2] * np.exp(0.5 * (a + b))], 1) - u
-
-    q = np.zeros(4)
-    r = residuals(field(q))
-    w = len(r) / np.log1p(IDENTITY_MAX_SCALE) ** 2
-    for _ in range(iterations):
-        J = np.stack([(residuals(field(q + step * e)) - r) / step for e in np.eye(len(q))], 1)
-        dq = np.linalg.solve(J.T @ J + w * np.eye(len(q)), -(J.T @ r + w * q))
-        q = q + dq
-        r = residuals(field(q))
-        if np.abs(dq).max() < 1e-6:
-            break
-    return field(q), q
+    return displacement
