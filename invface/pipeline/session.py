@@ -113,6 +113,9 @@ def _identity(model, shot, out, before, lam, progress):
         adapted, fit = actor_identity(model, frame, shot.curves, lam=lam, pose=shot.pose, progress=progress)
         out.mkdir(parents=True, exist_ok=True)
         adapted.save(actor)
+        if adapted is not model:
+            from ..report.identity import NAME, write_identity_figure
+            write_identity_figure(out / NAME, model.neutral, adapted.neutral, adapted.triangles, fit.coefficients)
         said = (f"The model was adapted to the face of {frame.name} first ({fit.describe()}; {actor.name})"
                 if adapted is not model else
                 f"The model is used as it is: the identity fit on {frame.name} moved it too far ({fit.describe()})")

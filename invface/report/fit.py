@@ -317,6 +317,17 @@ def _seconds(sec):
     return f"{sec['total']:.1f} ({stages})" if "total" in sec else stages
 
 
+def identity_section(run):
+    """The run's identity figure (``report.identity``), when the run adapted the model: a
+    heading, the picture and its caption; '' otherwise."""
+    from .identity import NAME
+    if not (Path(run) / NAME).is_file():
+        return ""
+    return ("<h2>the actor's identity</h2><figure><img src=\"" + NAME + "\" alt=\"identity\"><figcaption>the adapted "
+            "head coloured by how far it moved from the model it came from, and the face-shape space's "
+            "coefficients</figcaption></figure>")
+
+
 def write_report(run, title=None, quick=False):
     """Write ``run/index.html`` for the fit(s) in ``run``. Returns its path. quick: the
     pictures of ``_fit_images(quick=True)`` (a sequence's frame pages; ``invface report``
@@ -355,6 +366,7 @@ def write_report(run, title=None, quick=False):
     from .runs import run_notes
     missing = run_notes(run) if (run / "run.json").is_file() else run_notes(run.parent, run.name)
     body += "".join(f"<tr><td colspan={len(COMPARE)} class=note>{html.escape(n)}</td></tr>" for n in missing)
+    sections.insert(0, identity_section(run))
     page = (f"<!doctype html><html><head><meta charset=utf-8><title>{html.escape(title)}</title><style>"
             "body{font-family:sans-serif;margin:2em;max-width:1500px}table{border-collapse:collapse}"
             "td,th{border:1px solid #ccc;padding:4px 8px;font-size:90%}.grid{display:flex;flex-wrap:wrap;gap:8px}"

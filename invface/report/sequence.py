@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import InvfaceError
 from ..io.atomic import write_text
-from .fit import COMPARE, _figure
+from .fit import COMPARE, _figure, identity_section
 from .runs import run_notes
 
 ACTIVE = 0.05        # a control is drawn when it exceeds this in some frame
@@ -123,5 +123,5 @@ def write_sequence_report(run, title=None):
             "frame names link to the frame's own report.</p>"
             + (f"<p>Files: {files}</p>" if files else "")
             + "".join(f"<p class=note>{html.escape(n)}</p>" for n in run_notes(run))
-            + "".join(sections) + "</body></html>")
+            + identity_section(run) + "".join(sections) + "</body></html>")
     return write_text(run / "index.html", page)
