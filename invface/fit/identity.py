@@ -63,11 +63,12 @@ SILHOUETTE_WEIGHT = 0.3      # with this weight on their squared residuals
 
 @dataclass
 class IdentityFit:
-    """displacement (V,3) m of the neutral (the proportions' scale and the field together);
-    rms_before / rms_after px of all the curves on the fitting frame; proportions (4,): (a, b,
-    t, v) of the module's docstring; max_mm: the field's largest vertex displacement beyond
-    the proportions; coefficients (K,): the face-shape space's (``template.identity_space``), in
-    standard deviations (empty where the model has no space)."""
+    """displacement (V,3) m of the neutral (the face-shape space, the proportions and the field
+    together); rms_before / rms_after px of all the curves on the fitting frame; proportions
+    (4,): (a, b, t, v) of the module's docstring; max_mm: the field's largest vertex
+    displacement beyond the space and the proportions; coefficients (K,): the face-shape
+    space's (``template.identity_space``), in standard deviations (empty where the model has
+    no space)."""
     displacement: np.ndarray
     rms_before: float
     rms_after: float
