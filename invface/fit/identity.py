@@ -87,24 +87,52 @@ class IdentityFit:
                 f"{self.max_mm:.1f} mm")
 
 
-def curve_data(x, rotation, translation):
+def curve_data(x, rotation, translation, bias=None):
     """The curve term of the surface x (V,3) m posed by rotation (3,) rad and translation (3,) m,
     as a function ``data(d, *objs)`` of a neutral correction d (V,3) m (posed with the head), objs:
     (CurveObjective, weight) pairs: (signed distances (n,) px, their gradient (V,3) of 1/2 |r|^2,
-    per curve (vertex ids (m,), d r / d d (n_b,m,3)), in the order of the rows)."""
+    per curve (vertex ids (m,), d r / d d (n_b,m,3)), in the order of the rows). ``bias``
+    {curve: (n,) px} is subtracted from the signed distances (``detector_bias``)."""
     R = euler_xyz(np.asarray(rotation, float))
+    bias = bias or {}
 
     def data(d, *objs):
         xr = pose_points(x + d, rotation, translation)
         rows, g, blocks = [np.zeros(0)], np.zeros(x.shape), []
         for obj, w in objs:
-            for vid, r, dr_dx in obj.signed(xr):
+            for name, (vid, r, dr_dx) in zip(obj.curves, obj.signed(xr)):
+                b = bias.get(name)
+                r = r - b if b is not None and len(b) == len(r) else r
                 r, a = np.sqrt(w) * r, np.sqrt(w) * dr_dx @ R
                 np.add.at(g, vid, np.einsum("n,nmi->mi", r, a))
                 rows.append(r)
                 blocks.append((vid, a))
         return np.concatenate(rows), g, blocks
     return data
+
+
+def detector_bias(model, camera, curves, p, rotation, translation, detect):
+    """{curve: (n,) px}: the signed offsets of the detector's curves from the model's own on a
+    render of the model at controls p (P,), posed by rotation (3,) rad and translation (3,) m,
+    through ``camera`` (studio light, the model's skin albedo): on a face the model fits
+    exactly, what the detector's habits add (MediaPipe's face oval lies 7 px inside the built-in
+    head's outline at 720x540, its nose base 6 px off the model's). Without it the face-shape
+    space takes the habits for a face: on the built-in head's own render the identity moved the
+    head by 1.7 mm median. ``detect(image_srgb)`` -> {curve: (n,2) px} or None (no face);
+    the curves of ``curves`` it does not give have no bias."""
+    from ..io.images import linear_to_srgb
+    from ..render.synthetic import render_plate, skin_albedo, studio_light
+    from .curves import CurveObjective
+    sm = model.surface_model("blendshape")
+    x = sm.surface(np.asarray(p, float))
+    image, _ = render_plate(model, x, camera, studio_light(), skin_albedo(model), rotation, translation, noise=0.0,
+                            spp=16, parts_x=model.parts_positions(np.asarray(p, float)))
+    found = detect(linear_to_srgb(image))
+    if not found:
+        return {}
+    obj = CurveObjective(model, sm, camera, {k: v for k, v in found.items() if k in curves}, 0.0)
+    xr = pose_points(x, rotation, translation)
+    return {name: r for name, (_, r, _) in zip(obj.curves, obj.signed(xr))}
 
 
 def _operators(model):
@@ -115,7 +143,7 @@ def _operators(model):
 
 
 def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, length=IDENTITY_LENGTH,
-                 silhouette=SILHOUETTE_WEIGHT, space=True):
+                 silhouette=SILHOUETTE_WEIGHT, space=True, bias=None):
     """Smooth neutral correction (IdentityFit) so that the model at controls p (P,), posed by
     rotation (3,) rad and translation (3,) m, meets the plate curves {name: (n,2) px} seen by
     ``camera``: the face-shape space (where the model has one, ``template.identity_space``, and
@@ -123,7 +151,8 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
     set so that a correction of width ``length`` (m) costs as much as a pixel at each of the
     vertices of a curve across it: mu = (k length)^2 n_per_length, with k the camera's px per
     metre at the face; ``silhouette``: the weight of the outline curves (``SILHOUETTES``) in
-    the field."""
+    the field; ``bias`` {curve: (n,) px}: the curve source's own offsets from the model's
+    curves, subtracted from the residuals (``detector_bias``; None for drawn curves)."""
     sm = model.surface_model("blendshape")
     inner = CurveObjective(model, sm, camera, {k: v for k, v in curves.items() if k not in SILHOUETTES}, 0.0)
     outline = CurveObjective(model, sm, camera, {k: v for k, v in curves.items() if k in SILHOUETTES}, 0.0)
@@ -132,7 +161,7 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
     every = ((inner, 1.0), (outline, 1.0))          # all curves at full weight: the proportions and the RMS
     x = sm.surface(np.asarray(p, float))
     V = len(x)
-    data = curve_data(x, rotation, translation)
+    data = curve_data(x, rotation, translation, bias)
 
     n0 = np.asarray(model.neutral, float)
     r0 = data(0.0, *every)[0]

@@ -110,7 +110,8 @@ def _identity(model, shot, out, before, lam, progress):
         said = before.get("identity", "")
     else:
         _say(progress, message=f"the actor's identity from the curves of {frame.name}")
-        adapted, fit = actor_identity(model, frame, shot.curves, lam=lam, pose=shot.pose, progress=progress)
+        adapted, fit = actor_identity(model, frame, shot.curves, lam=lam, pose=shot.pose, progress=progress,
+                                      source=shot.source)
         out.mkdir(parents=True, exist_ok=True)
         adapted.save(actor)
         if adapted is not model:
