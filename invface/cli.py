@@ -373,7 +373,7 @@ def cmd_fit_plate(args):
         return _calibrate(model, plate, path, 30, curves=curves, source=source, lam_curves=args.curve_lambda)
 
     model, cal, run = prepare_run(model, shot, out, given, identity, args.restart, args.curve_lambda, calibrate,
-                                  progress=_events)
+                                  progress=_events, identity_space=args.identity_space)
     options = dict(iterations=args.iterations, shading=not args.no_shading, lam_curves=args.curve_lambda,
                    solver=args.solver, temporal=args.temporal, temporal_shading=args.temporal_shading)
     if args.face:
@@ -676,6 +676,11 @@ def build_parser():
                     help="fit with the model as it is (default: its neutral first adapted to the actor, its "
                          "proportions and a smooth field, from the curves of the photo or of a sequence's "
                          "calibration frame, written to DIR/actor.npz)")
+    fp.add_argument("--identity-space", action="store_true",
+                    help="start the actor's identity in the face-shape space (ICT-FaceKit's 20 identity shapes, "
+                         "with the detector's own offsets taken off detected curves), then the proportions and "
+                         "the field; a trial: from one photo it does not yet beat the built-in head in 3D on "
+                         "faces not tuned on (bench/identity_3d.py)")
     fp.add_argument("--restart", "--force", dest="restart", action="store_true",
                     help="start over: replace an earlier run's fits in the output folder (a rerun with the same "
                          "inputs otherwise resumes it, skipping the frames already fitted)")

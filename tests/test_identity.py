@@ -53,15 +53,15 @@ def test_identity_from_one_frame_carries_to_other_expressions(small_expressive_m
 
 def test_identity_finds_the_face_proportions(small_expressive_model):
     """A wider, shorter face (width x1.06, height x0.95, depth their geometric mean): the
-    proportions recover both scales, and the field left after them stays small (without the
-    face-shape space, whose shapes also widen a face)."""
+    proportions recover both scales, and the field left after them stays small (by default,
+    without the face-shape space, whose shapes would take a share of the width)."""
     m = small_expressive_model
     cam = Camera.front_view(360, 270)
     p = np.zeros(FitVector.of(m).P)
     s = np.array([1.06, 0.95, np.sqrt(1.06 * 0.95)])
     c = m.neutral[np.concatenate([m.curves[k] for k in m.curves])].mean(0)
     truth = _with_neutral(m, c + (m.neutral - c) * s)
-    fit = fit_identity(m, cam, _curves(truth, cam, p), p, ROT, TR, space=False)   # the space takes a share of a width
+    fit = fit_identity(m, cam, _curves(truth, cam, p), p, ROT, TR)
     assert np.abs(np.exp(fit.proportions[:2]) - s[:2]).max() < 0.01, fit.proportions
     assert fit.rms_after < 0.2 * fit.rms_before
     assert fit.max_mm < 1.0, fit.max_mm
@@ -106,7 +106,7 @@ def test_identity_in_the_space_recovers_a_known_face_in_3d(small_expressive_mode
     truth = _with_neutral(m, m.neutral + np.tensordot(c, S, axes=1))
     curves = _curves(truth, cam, p)
     err = lambda d: np.median(np.linalg.norm(m.neutral + d - truth.neutral, axis=1))     # noqa: E731
-    with_space = fit_identity(m, cam, curves, p, ROT, TR)
+    with_space = fit_identity(m, cam, curves, p, ROT, TR, space=True)
     without = fit_identity(m, cam, curves, p, ROT, TR, space=False)
     assert err(with_space.displacement) < 0.5 * err(0.0), (err(with_space.displacement), err(0.0))
     assert err(with_space.displacement) < 0.8 * err(without.displacement)
@@ -124,8 +124,8 @@ def test_the_detectors_habits_are_taken_off_before_the_identity(small_expressive
     habit = {k: v + [0.0, 3.0] for k, v in _curves(m, cam, p).items()}
     bias = detector_bias(m, cam, habit, p, ROT, TR, lambda image: habit)
     assert set(bias) == set(habit) and all(np.abs(b).max() > 1.0 for k, b in bias.items() if k == "nose_base")
-    plain = fit_identity(m, cam, habit, p, ROT, TR)
-    fixed = fit_identity(m, cam, habit, p, ROT, TR, bias=bias)
+    plain = fit_identity(m, cam, habit, p, ROT, TR, space=True)
+    fixed = fit_identity(m, cam, habit, p, ROT, TR, space=True, bias=bias)
     moved = lambda f: np.linalg.norm(f.displacement, axis=1).max()       # noqa: E731
     assert moved(plain) > 0.001 and moved(fixed) < 0.1 * moved(plain), (moved(plain), moved(fixed))
     assert fixed.rms_after < 0.05

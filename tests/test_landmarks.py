@@ -101,7 +101,7 @@ def test_a_real_photo_fits_end_to_end_with_both_models(photo, tmp_path):
     assert (out / "actor.npz").is_file() and "face width x" in r.stdout
     assert "The model was adapted to the face of" in page or "The model is used as it is" in page
     if "The model was adapted" in page:          # the identity's picture, with the face-shape space
-        assert (out / "identity.png").is_file() and 'src="identity.png"' in page and "face-shape space at" in page
+        assert (out / "identity.png").is_file() and 'src="identity.png"' in page
     # what the pipeline gets: the Live Link Face CSV and the USD take (with its plate card) by default,
     # the rigs when asked; the colour space the plate was read in is on the page
     assert (out / "arkit_blendshape.csv").is_file() and (out / "face_simulation.usd").is_file()

@@ -143,11 +143,11 @@ def _operators(model):
 
 
 def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, length=IDENTITY_LENGTH,
-                 silhouette=SILHOUETTE_WEIGHT, space=True, bias=None):
+                 silhouette=SILHOUETTE_WEIGHT, space=False, bias=None):
     """Smooth neutral correction (IdentityFit) so that the model at controls p (P,), posed by
     rotation (3,) rad and translation (3,) m, meets the plate curves {name: (n,2) px} seen by
-    ``camera``: the face-shape space (where the model has one, ``template.identity_space``, and
-    ``space``) with the proportions, then the field. The weight mu of the field's bi-Laplacian is
+    ``camera``: with ``space``, the face-shape space (where the model has one,
+    ``template.identity_space``) with the proportions, else the proportions alone; then the field. The weight mu of the field's bi-Laplacian is
     set so that a correction of width ``length`` (m) costs as much as a pixel at each of the
     vertices of a curve across it: mu = (k length)^2 n_per_length, with k the camera's px per
     metre at the face; ``silhouette``: the weight of the outline curves (``SILHOUETTES``) in

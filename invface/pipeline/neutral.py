@@ -65,13 +65,13 @@ def _detect_curves(image_srgb):
         return None
 
 
-def actor_identity(model, frame, curves, lam=None, pose=None, progress=None, source=""):
+def actor_identity(model, frame, curves, lam=None, pose=None, progress=None, source="", space=False):
     """The model adapted to the actor of a shot from one neutral-looking frame's curves
     {name: (n,2) px}: the controls and pose of Eq. 15 (``pose``, a PoseEstimate, or fitted
     here), then a smooth neutral correction (``fit.identity.fit_identity``) carried into the
-    anatomy (``morph.build.adapt_identity``). Curves whose ``source`` is the landmark detector
-    are first corrected by the detector's own offsets from the model's curves
-    (``fit.identity.detector_bias``). Returns (FaceModel, IdentityFit); the model is
+    anatomy (``morph.build.adapt_identity``). With ``space`` the correction starts in the
+    face-shape space, and curves whose ``source`` is the landmark detector first lose the
+    detector's own offsets from the model's curves (``fit.identity.detector_bias``). Returns (FaceModel, IdentityFit); the model is
     ``model`` itself when the correction is larger than ``IDENTITY_MAX_MM`` (not an identity:
     a wrong frame or wrong curves), with a message saying so."""
     from ..fit.identity import IDENTITY_MAX_MM, detector_bias, fit_identity
@@ -79,11 +79,12 @@ def actor_identity(model, frame, curves, lam=None, pose=None, progress=None, sou
     from .plates import pose_from_curves
     pose = pose or pose_from_curves(model, frame.plate, curves, lam)
     bias = None
-    if "detector" in source.lower():
+    if space and "detector" in source.lower():
         _say(progress, message="the detector's own offsets, on a render of the model at the fitted pose")
         bias = detector_bias(model, frame.plate.camera, curves, pose.p, pose.rotation, pose.translation,
                              _detect_curves)
-    fit = fit_identity(model, frame.plate.camera, curves, pose.p, pose.rotation, pose.translation, bias=bias)
+    fit = fit_identity(model, frame.plate.camera, curves, pose.p, pose.rotation, pose.translation, space=space,
+                       bias=bias)
     if fit.max_mm > IDENTITY_MAX_MM:
         _say(progress, message=f"{frame.name}: {fit.describe()}: more than {IDENTITY_MAX_MM:g} mm is no identity "
                                "correction; the model is used as it is")

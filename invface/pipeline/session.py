@@ -58,7 +58,7 @@ def shot_frame(model, clip, whole=None, neutral_frame=None, curves=None, face=0,
 
 
 def prepare_run(model, shot, out, calibration=None, identity=True, restart=False, lam=None, calibrate=None,
-                progress=None):
+                progress=None, identity_space=False):
     """The model and calibration a run fits its frames with, and what run.json records of them.
 
     shot: the ShotFrame (None when neither is needed: a given ``calibration`` and no
@@ -66,7 +66,8 @@ def prepare_run(model, shot, out, calibration=None, identity=True, restart=False
     calibration came from another frame is refused unless ``restart``. With ``identity`` the
     model is adapted to the shot frame's face (``neutral.actor_identity``) and saved as
     out/actor.npz, or that file is reused when the run being resumed made it from the same
-    frame; the model is then read back from it, as a resumed run reads it. Without a given
+    frame; the model is then read back from it, as a resumed run reads it; ``identity_space``:
+    the adaptation starts in the face-shape space (``neutral.actor_identity``). Without a given
     ``calibration``, out/calib.npz is reused likewise or made by ``calibrate(model, plate,
     path, curves, source)`` (default: ``plates.auto_calibrate`` and save). Returns (model,
     Calibration or PlateCalibration, {run.json keys})."""
@@ -79,14 +80,18 @@ def prepare_run(model, shot, out, calibration=None, identity=True, restart=False
         record["calibration_why"] = shot.why
     before = {} if restart else read_run(out)
     mine = {"identity_from": frame.digest if identity else None}
+    if identity_space:
+        mine["identity_space"] = True
     if calibration is None:
         mine["calibrated_on"] = frame.digest
     if earlier_fits(out) and any(before.get(k) != v for k, v in mine.items()) and not restart:
         raise InvfaceError(f"{out}: holds an earlier run's fits; pass --restart to replace them, or "
                            "choose another output folder")           # refused before any work is done
     if identity:
-        model, record["identity"] = _identity(model, shot, out, before, lam, progress)
+        model, record["identity"] = _identity(model, shot, out, before, lam, progress, identity_space)
         record["identity_from"] = frame.digest
+        if identity_space:
+            record["identity_space"] = True
     if calibration is None:
         saved = out / "calib.npz"
         if saved.is_file() and all(before.get(k) == v for k, v in mine.items()):
@@ -99,19 +104,19 @@ def prepare_run(model, shot, out, calibration=None, identity=True, restart=False
     return model, calibration, record
 
 
-def _identity(model, shot, out, before, lam, progress):
+def _identity(model, shot, out, before, lam, progress, space=False):
     """(the model adapted to the shot frame's face and read back from out/actor.npz, the
     sentence run.json keeps), reusing the resumed run's actor.npz made from the same frame."""
     from ..model.facemodel import FaceModel
     from .neutral import actor_identity
     frame, actor = shot.frame, out / "actor.npz"
-    if actor.is_file() and before.get("identity_from") == frame.digest:
+    if actor.is_file() and before.get("identity_from") == frame.digest and before.get("identity_space", False) == space:
         _say(progress, message=f"reusing {actor}: the actor's identity from {frame.name}, made by the run being resumed")
         said = before.get("identity", "")
     else:
         _say(progress, message=f"the actor's identity from the curves of {frame.name}")
         adapted, fit = actor_identity(model, frame, shot.curves, lam=lam, pose=shot.pose, progress=progress,
-                                      source=shot.source)
+                                      source=shot.source, space=space)
         out.mkdir(parents=True, exist_ok=True)
         adapted.save(actor)
         if adapted is not model:
