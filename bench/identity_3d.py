@@ -12,7 +12,7 @@ to the true face.
    as a user's photo) or are projected from the actor (``truth``).
 3. The built-in head is posed by Eq. 15 (``pipeline.plates.pose_from_curves``) and its identity
    fitted (``fit.identity.fit_identity``) as ``fit-plate`` fits it: the face-shape space
-   (``template.identity_space``) with the proportions, then the field, the detector's own offsets
+   (``morph.identity_space``) with the proportions, then the field, the detector's own offsets
    (``fit.identity.detector_bias``) taken off detected curves ("space"); and as before the space
    (the proportions and the field alone, "no space"), and with the space but without the
    detector's offsets ("space, no bias").

@@ -72,7 +72,7 @@ def test_face_shape_space_jacobian_matches_finite_differences(small_expressive_m
     head by closest point) equals central differences of the residuals."""
     from invface.fit.curves import CurveObjective
     from invface.fit.identity import curve_data, space_jacobian
-    from invface.template.identity_space import identity_shapes
+    from invface.morph.identity_space import identity_shapes
     m = small_expressive_model
     S = identity_shapes(m)
     assert S.shape == (20, len(m.neutral), 3) and np.abs(S).max() > 0.003
@@ -96,7 +96,7 @@ def test_identity_in_the_space_recovers_a_known_face_in_3d(small_expressive_mode
     """A face of the space (coefficients 1.5 sd on four shapes, depth included), seen from the
     front: the fitted head is nearer the true face in 3D than the template, depth included,
     which the field alone cannot see."""
-    from invface.template.identity_space import identity_shapes
+    from invface.morph.identity_space import identity_shapes
     m = small_expressive_model
     S = identity_shapes(m)
     cam = Camera.front_view(360, 270)

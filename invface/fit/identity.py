@@ -17,7 +17,7 @@ small eps term keeps the field near zero where no curve is (the depth along the 
 known through the smoothness). Gauss-Newton on the foot points, each step one sparse solve.
 
 Before the field, the neutral moves in a face-shape space, where the model has one
-(``template.identity_space``: ICT-FaceKit's 20 identity shapes S_i, in standard deviations), by
+(``morph.identity_space``: ICT-FaceKit's 20 identity shapes S_i, in standard deviations), by
 sum_i c_i S_i under the Gaussian prior |c|^2 n IDENTITY_PRIOR_PX^2 (n residuals: a coefficient at
 1 sd costs as much as all the curves at that RMS). From one frontal view the curves see no
 depth; the space moves the depth with the outline as real faces do. It is fitted jointly with
@@ -67,7 +67,7 @@ class IdentityFit:
     together); rms_before / rms_after px of all the curves on the fitting frame; proportions
     (4,): (a, b, t, v) of the module's docstring; max_mm: the field's largest vertex
     displacement beyond the space and the proportions; coefficients (K,): the face-shape
-    space's (``template.identity_space``), in standard deviations (empty where the model has
+    space's (``morph.identity_space``), in standard deviations (empty where the model has
     no space)."""
     displacement: np.ndarray
     rms_before: float
@@ -147,9 +147,9 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
     """Smooth neutral correction (IdentityFit) so that the model at controls p (P,), posed by
     rotation (3,) rad and translation (3,) m, meets the plate curves {name: (n,2) px} seen by
     ``camera``: with ``space``, the face-shape space (where the model has one,
-    ``template.identity_space``) with the proportions, else the proportions alone; then the field. The weight mu of the field's bi-Laplacian is
-    set so that a correction of width ``length`` (m) costs as much as a pixel at each of the
-    vertices of a curve across it: mu = (k length)^2 n_per_length, with k the camera's px per
+    ``morph.identity_space``) with the proportions, else the proportions alone; then the
+    field. The weight mu of the field's bi-Laplacian is set so that a correction of width
+    ``length`` (m) costs as much as a pixel at each of the vertices of a curve across it: mu = (k length)^2 n_per_length, with k the camera's px per
     metre at the face; ``silhouette``: the weight of the outline curves (``SILHOUETTES``) in
     the field; ``bias`` {curve: (n,) px}: the curve source's own offsets from the model's
     curves, subtracted from the residuals (``detector_bias``; None for drawn curves)."""
@@ -166,7 +166,7 @@ def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, 
     n0 = np.asarray(model.neutral, float)
     r0 = data(0.0, *every)[0]
     c = n0[np.concatenate([v for obj, _ in every for v in obj.vertices.values()])].mean(0)
-    from ..template.identity_space import identity_shapes
+    from ..morph.identity_space import identity_shapes
     S = identity_shapes(model) if space else None
     D, q, coef = _global_shape(n0, c, np.zeros((0, V, 3)) if S is None else S, lambda d: data(d, *every))
     d = np.zeros((V, 3))

@@ -1,8 +1,9 @@
 """The built-in head's face-shape space: ICT-FaceKit's 20 identity shapes carried onto it.
 
-``data/identity_ict.npz`` holds ICT-FaceKit's first 20 identity (PCA) shapes as offsets of the
-template's render skin at resolution 1, derived by ``scripts/derive_identity_shapes.py`` (MIT;
-the licence is ``data/LICENSE-ICT-FaceKit.txt``). They are ICT's components scaled by their
+``template/data/identity_ict.npz`` holds ICT-FaceKit's first 20 identity (PCA) shapes as offsets
+of the template's render skin at resolution 1, derived by ``scripts/derive_identity_shapes.py``
+(MIT; the licence is ``template/data/LICENSE-ICT-FaceKit.txt``). The space lives with the
+builder because it is carried onto a face as the builder carries shapes. They are ICT's components scaled by their
 standard deviations: a face of the space is the neutral plus sum_i c_i S_i, c ~ N(0, 1). The
 identity fit (``fit.identity``) moves a neutral within this space before its smooth field,
 and ``morph.build.adapt_identity`` carries the anatomy (skull, muscles, tets) along.
@@ -15,9 +16,9 @@ import numpy as np
 
 from ..errors import BundleError
 from ..io.arrays import load_npz
-from ..morph.transfer import spread
+from .transfer import spread
 
-DATA = Path(__file__).parent / "data" / "identity_ict.npz"
+DATA = Path(__file__).parent.parent / "template" / "data" / "identity_ict.npz"
 
 
 def load(path=DATA):
@@ -35,11 +36,11 @@ def identity_shapes(model, path=DATA):
       (as ``morph.transfer.carry_offsets``);
     - the built-in head at another resolution takes them by closest point on the stored skin;
     - any other model (an actor from another template) has no space (None)."""
-    from .arkit_shapes import carry
+    from ..template.arkit_shapes import carry
     shapes = load(path)
     X0, X = shapes["neutral"], np.asarray(model.neutral, float)
     if X.shape == X0.shape:
-        from ..morph.build import face_vertices
+        from .build import face_vertices
         face = face_vertices(model)
         return shapes["deltas"] * (spread(X, face) / spread(X0, face))
     if model.meta.get("generator") == "invface.template":
