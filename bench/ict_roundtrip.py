@@ -25,7 +25,7 @@ shapes, fitted with the built-in head's ARKit controls carried onto the same act
    recovered values (target first), its error (target within 0.15) and the largest other
    value (target below 0.1).
 
-Each fit is appended to OUT/fits.jsonl as it finishes; a second run resumes.
+Each fit is appended to OUT/fits_KIND.jsonl as it finishes; a second run resumes.
 """
 from __future__ import annotations
 
