@@ -19,7 +19,7 @@ import numpy as np
 import invface
 from invface.fit import samples
 
-from _common import write_json
+from _common import add_json_option, write_json
 
 PLATES = {"shut": ({"eyeBlinkLeft": 1.0, "eyeBlinkRight": 1.0}, (0.03, -0.1, 0.0)),
           "half": ({"eyeBlinkLeft": 0.5, "eyeBlinkRight": 0.5, "eyeSquintLeft": 0.4}, (0.03, -0.1, 0.0))}
@@ -28,7 +28,7 @@ PLATES = {"shut": ({"eyeBlinkLeft": 1.0, "eyeBlinkRight": 1.0}, (0.03, -0.1, 0.0
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--resolution", type=float, default=1.0)
-    ap.add_argument("--json", type=Path)
+    add_json_option(ap)
     a = ap.parse_args()
     model = invface.template.build(resolution=a.resolution)
     samples.SAMPLES = {n: ("blendshape", w, None, rot, (0.0, 0.0, 0.0)) for n, (w, rot) in PLATES.items()}

@@ -98,28 +98,14 @@ def test_a_hand_over_the_mouth_weighs_less_in_the_albedo(small_expressive_model)
     The reweighted solve (``robust_weights``: a stiff first pass, then rows the face's light
     and albedo cannot explain weigh less) leaves at least a quarter less of it in the albedo
     under it than the plain Eq. 14 solve, and the clean plate's albedo no worse."""
-    from invface.fit.curves import curve_points, projection_jacobian
-    from invface.render.synthetic import render_plate, skin_albedo, studio_light
+    from invface.fit.samples import occluded_mouth_plate
     m = small_expressive_model
-    cam = Camera.front_view(320, 240)
-    g, a = studio_light(), skin_albedo(m)
-    clean, _ = render_plate(m, m.neutral, cam, g, a, spp=16)
-    lips = np.concatenate([projection_jacobian(cam, curve_points(m, n, m.neutral))[0]
-                           for n in ("lip_outer_upper", "lip_outer_lower")])
-    lo, hi = lips.min(0) - [12, 10], lips.max(0) + [12, 14]
-    yy, xx = np.mgrid[:240, :320]
-    box = (xx >= lo[0]) & (xx <= hi[0]) & (yy >= lo[1]) & (yy <= hi[1])
-    stripes = np.sin(xx / 3.0)
-    hand = np.stack([0.42 + 0.08 * stripes, 0.28 + 0.05 * stripes, 0.22 + 0.04 * stripes], -1)
-    occluded = clean.copy()
-    occluded[box] = hand[box]
-    uv = cam.project(m.neutral)[0]
-    front = shading.vertex_normals(m.neutral, m.triangles)[:, 2] > 0.3
-    under = front & (uv[:, 0] >= lo[0]) & (uv[:, 0] <= hi[0]) & (uv[:, 1] >= lo[1]) & (uv[:, 1] <= hi[1])
+    o = occluded_mouth_plate(m)
+    cam, a, under = o["camera"], o["albedo"], o["under"]
     err = {}
-    for name, image in (("clean", clean), ("occluded", occluded)):
+    for name in ("clean", "occluded"):
         for robust in (0, 2):
-            cal = calibrate(m.triangles, m.neutral, image, cam, lam=2500.0, robust=robust, parts=m.parts)
+            cal = calibrate(m.triangles, m.neutral, o[name], cam, lam=2500.0, robust=robust, parts=m.parts)
             err[name, robust] = np.abs(cal.albedo - a)[under].mean()
     assert err["occluded", 2] < 0.75 * err["occluded", 0], err
     assert err["clean", 2] < 1.1 * err["clean", 0] + 1e-3, err

@@ -86,6 +86,32 @@ def write_plate(model, folder, name, kind, controls, rotation, translation, seed
     return path
 
 
+def occluded_mouth_plate(model, size=(320, 240)):
+    """A hand over the mouth: the model's neutral rendered front on (``Camera.front_view`` at
+    ``size``, studio light, its skin albedo), and the same plate with a skin-toned, striped box
+    over the mouth (the outer lips' extent and 10-14 px more). Returns {"camera", "albedo" (V,3),
+    "clean", "occluded" (H,W,3) linear, "box" (H,W) bool, "front" (V,) bool: the vertices
+    facing the camera, "under" (V,) bool: those whose projection falls in the box}."""
+    from ..render import shading
+    cam = Camera.front_view(*size)
+    albedo = skin_albedo(model)
+    clean, _ = render_plate(model, model.neutral, cam, studio_light(), albedo, spp=16)
+    lips = np.concatenate([projection_jacobian(cam, curve_points(model, n, model.neutral))[0]
+                           for n in ("lip_outer_upper", "lip_outer_lower")])
+    lo, hi = lips.min(0) - [12, 10], lips.max(0) + [12, 14]
+    yy, xx = np.mgrid[:size[1], :size[0]]
+    box = (xx >= lo[0]) & (xx <= hi[0]) & (yy >= lo[1]) & (yy <= hi[1])
+    stripes = np.sin(xx / 3.0)
+    hand = np.stack([0.42 + 0.08 * stripes, 0.28 + 0.05 * stripes, 0.22 + 0.04 * stripes], -1)
+    occluded = clean.copy()
+    occluded[box] = hand[box]
+    uv = cam.project(model.neutral)[0]
+    front = shading.vertex_normals(model.neutral, model.triangles)[:, 2] > 0.3
+    under = front & (uv[:, 0] >= lo[0]) & (uv[:, 0] <= hi[0]) & (uv[:, 1] >= lo[1]) & (uv[:, 1] <= hi[1])
+    return {"camera": cam, "albedo": albedo, "clean": clean, "occluded": occluded, "box": box, "under": under,
+            "front": front}
+
+
 def clip_controls(model, n, fps=24.0):
     """A smooth trajectory of n frames for a synthetic clip: a smile that rises and falls, the
     jaw opening and closing, the brows lifting, the head turning and nodding. Returns
