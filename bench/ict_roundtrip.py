@@ -144,9 +144,10 @@ def interleave(specs):
     return out
 
 
-def arkit_of(model, weights, jaw):
-    w = np.array([weights.get(n, 0.0) for n in model.blendshape_names])
-    return arkit_values(model.blendshape_names, w, jaw)
+def arkit_of(model, controls):
+    """The ARKit values of ``controls`` ({"weights", "jaw"}) on ``model``."""
+    p, K = model.parameters(controls), len(model.blendshape_names)
+    return arkit_values(model.blendshape_names, p[:K], p[K:])
 
 
 def run(out, kind, per_control, single, limit):
@@ -174,7 +175,7 @@ def run(out, kind, per_control, single, limit):
         fit = fit_plate(fitted, load_plate(path), cal, read_curves(path.with_name(name + ".curves.json"), fitted),
                         kind=kind)
         row = {"plate": name, "kind": kind,
-               "true": arkit_of(truth, controls["weights"], controls["jaw"]),
+               "true": arkit_of(truth, controls),
                "fitted": arkit_values(fitted.blendshape_names, fit.p[fit.vector.weights], fit.p[fit.vector.jaw]),
                "curve_rms_px": fit.curve_rms_px, "plate_s": round(t_plate, 2), "fit_s": round(fit.seconds["total"], 2)}
         with log.open("a") as f:

@@ -43,6 +43,7 @@ from invface.fit.samples import write_plate
 from invface.io.meshes import read_mesh
 from invface.mesh.closest import closest_points
 from invface.morph.build import build_model
+from invface.morph.orient import kabsch
 from invface.pipeline.neutral import _detect_curves
 from invface.pipeline.plates import find_curves, pose_from_curves
 from invface.render.plates import load_plate
@@ -54,24 +55,13 @@ BUILT_MM = 10.0       # a build whose eye and mouth corners, nose or chin lie fu
                       # annotated ones is a failed build (the morph, issue 62): its face is left out
 
 
-def similarity(A, B):
-    """Scale s, rotation R, translation t minimising |s R A + t - B| over rows (Umeyama)."""
-    ma, mb = A.mean(0), B.mean(0)
-    a, b = A - ma, B - mb
-    U, S, Vt = np.linalg.svd(b.T @ a)
-    D = np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))])
-    R = U @ D @ Vt
-    s = np.trace(np.diag(S) @ D) / (a ** 2).sum()
-    return s, R, mb - s * R @ ma
-
-
 def face_error_mm(truth, neutral, triangles):
     """Median and p90 (mm) of the true face's vertices to ``neutral``'s surface (same topology),
     after a similarity alignment of ``neutral`` onto ``truth`` on those vertices."""
     nose = truth.neutral[truth.landmarks["nose_tip"]]
     face = np.flatnonzero(np.linalg.norm(truth.neutral - nose, axis=1) < REACH)
-    s, R, t = similarity(neutral[face], truth.neutral[face])
-    d = closest_points(truth.neutral[face], s * neutral @ R.T + t, triangles)[2] * 1000
+    R, t = kabsch(neutral[face], truth.neutral[face], scale=True)
+    d = closest_points(truth.neutral[face], neutral @ R.T + t, triangles)[2] * 1000
     return float(np.median(d)), float(np.percentile(d, 90))
 
 
