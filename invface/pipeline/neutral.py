@@ -58,9 +58,9 @@ def pick_neutral(model, clip, candidates=8, lam=None, progress=None, face=0, ove
 
 def _detect_curves(image_srgb):
     """The detector's curves on an sRGB image, or None where it finds no face."""
-    from ..fit.landmarks import curves_from_landmarks, detect_landmarks
+    from ..fit.landmarks import detect_curves
     try:
-        return curves_from_landmarks(detect_landmarks(image_srgb, "the model's own render"))
+        return detect_curves(image_srgb, "the model's own render")
     except InvfaceError:
         return None
 
@@ -70,16 +70,17 @@ def actor_identity(model, frame, curves, lam=None, pose=None, progress=None, sou
     {name: (n,2) px}: the controls and pose of Eq. 15 (``pose``, a PoseEstimate, or fitted
     here), then a smooth neutral correction (``fit.identity.fit_identity``) carried into the
     anatomy (``morph.build.adapt_identity``). With ``space`` the correction starts in the
-    face-shape space, and curves whose ``source`` is the landmark detector first lose the
-    detector's own offsets from the model's curves (``fit.identity.detector_bias``). Returns (FaceModel, IdentityFit); the model is
+    face-shape space, and curves whose ``source`` is the landmark detector (``plates.DETECTOR``)
+    first lose the detector's own offsets from the model's curves
+    (``fit.identity.detector_bias``). Returns (FaceModel, IdentityFit); the model is
     ``model`` itself when the correction is larger than ``IDENTITY_MAX_MM`` (not an identity:
     a wrong frame or wrong curves), with a message saying so."""
     from ..fit.identity import IDENTITY_MAX_MM, detector_bias, fit_identity
     from ..morph.build import adapt_identity
-    from .plates import pose_from_curves
+    from .plates import DETECTOR, pose_from_curves
     pose = pose or pose_from_curves(model, frame.plate, curves, lam)
     bias = None
-    if space and "detector" in source.lower():
+    if space and source == DETECTOR:
         _say(progress, message="the detector's own offsets, on a render of the model at the fitted pose")
         bias = detector_bias(model, frame.plate.camera, curves, pose.p, pose.rotation, pose.translation,
                              _detect_curves)
