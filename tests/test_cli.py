@@ -307,6 +307,12 @@ def test_implausible_plate_inputs_are_refused_or_flagged(small_expressive_model,
     assert "holds an earlier run's fits" in capsys.readouterr().err
     assert main(["fit-plate", *args, "-o", str(tmp_path / "one"), "--force"]) == 0
     assert json.loads((tmp_path / "one/blendshape/fit.json").read_text())["warnings"] == []
+    # a run whose identity started in the face-shape space is another run, either way round: not resumed
+    assert main(["fit-plate", *args, "-o", str(tmp_path / "one"), "--identity-space"]) == 2
+    assert "holds an earlier run's fits" in capsys.readouterr().err
+    assert main(["fit-plate", *args, "-o", str(tmp_path / "space"), "--identity-space"]) == 0
+    assert main(["fit-plate", *args, "-o", str(tmp_path / "space")]) == 2
+    assert "holds an earlier run's fits" in capsys.readouterr().err
 
     import invface.fit.plate as plate_module
     real = plate_module.fit_plate
