@@ -115,10 +115,9 @@ def detector_bias(model, camera, curves, p, rotation, translation, detect):
     """{curve: (n,) px}: the signed offsets of the detector's curves from the model's own on a
     render of the model at controls p (P,), posed by rotation (3,) rad and translation (3,) m,
     through ``camera`` (studio light, the model's skin albedo): on a face the model fits
-    exactly, what the detector's habits add (MediaPipe's face oval lies 7 px inside the built-in
-    head's outline at 720x540, its nose base 6 px off the model's). Without it the face-shape
-    space takes the habits for a face: on the built-in head's own render the identity moved the
-    head by 1.7 mm median. ``detect(image_srgb)`` -> {curve: (n,2) px} or None (no face);
+    exactly, what the detector's habits add (where its face oval and nose base lie against the
+    model's outline and nose). Without it the face-shape space takes the habits for a face.
+    ``detect(image_srgb)`` -> {curve: (n,2) px} or None (no face);
     the curves of ``curves`` it does not give have no bias."""
     from ..io.images import linear_to_srgb
     from ..render.synthetic import render_plate, skin_albedo, studio_light
