@@ -12,7 +12,7 @@ from invface.mesh.triangles import vertex_normals
 from invface.morph.blendshapes import read_blendshapes, recognised
 from invface.morph.build import build_model, inside_fraction
 from invface.morph.curvature import stencil_curvature
-from invface.morph.landmarks import template_landmarks
+from invface.morph.landmarks import find_landmarks, template_landmarks
 from invface.morph.openings import OPENINGS, inner_surfaces, opening_centres, ordered_loops, split_loop
 from invface.morph.synthetic import front_part, onto_part, random_identity, random_pose
 from invface.morph.target import clean
@@ -131,6 +131,78 @@ def test_partial_scan_is_completed_from_the_template(small_expressive_model):
     on[used] = True
     assert err[on].mean() < 6.0 and err[~on].mean() < 12.0, (err[on].mean(), err[~on].mean())
     assert res.stats["quality"]["inverted"] == 0
+
+
+def _kept_part(X, F, keep):
+    """(ids of the kept vertices, faces on them) for the triangles ``keep`` (T,) bool."""
+    ids = np.unique(F[keep])
+    remap = np.full(len(X), -1)
+    remap[ids] = np.arange(len(ids))
+    return ids, remap[F[keep]]
+
+
+def test_a_landmark_rule_that_finds_nothing_falls_back(small_expressive_model):
+    """A scan cut 2 cm below the nose tip: the chin rule finds no profile below it. The chin
+    falls back to the template's carried by the face similarity, with the rule's words, and
+    the neck start is off the scan; nothing raises. (The mouth, cut away too, is not held
+    here: its corners are registered onto the cut's edge.)"""
+    tpl = small_expressive_model
+    tl = template_landmarks(tpl)
+    X = random_identity(tpl.neutral, 3, amplitude=0.003)
+    _, faces = _kept_part(X, tpl.triangles, X[tpl.triangles].mean(1)[:, 1] > tl["nose_tip"][1] - 0.02)
+    ids = np.unique(faces)
+    L, off, fell = find_landmarks(X[ids], np.searchsorted(ids, faces), tpl)
+    assert fell["chin"] == "the profile ends below the nose: no chin found"
+    assert "neck_start" in off
+    assert L["chin"][1] < tl["nose_tip"][1] - 0.05            # below the cut, where a chin is
+    assert np.linalg.norm(L["nose_tip"] - tl["nose_tip"]) < 0.005
+
+
+@pytest.mark.parametrize("damage", ["chin cut off", "hole at the lips"])
+def test_a_damaged_scan_builds_and_simulates(small_expressive_model, damage):
+    """Issue 62 item 2. A scan cut 3 mm below the lower lip (no chin): the chin found on the cut
+    edge, with the template's chin more than 1 cm off the scan, is off the scan; before, the
+    cut edge was taken for the chin (21 mm off) and the stomion, placed from it, was 8 mm
+    off. A scan with a 8 mm wide hole down the lips (a scanner's dropout): the profile has no
+    mouth, the stomion and lips fall back with a warning, and the hole, narrower than the
+    carried mouth corners' span, is not taken for the parted lips. Both build, the mouth
+    corners and the stomion within 5 mm, and a smile simulates."""
+    from invface.sim.quasistatic import Simulator
+    from invface.template.expressions import ACTION_UNITS, activations_for
+    tpl = small_expressive_model
+    tl = template_landmarks(tpl)
+    X = random_identity(tpl.neutral, 3, amplitude=0.003)
+    c = X[tpl.triangles].mean(1)
+    if damage == "chin cut off":
+        keep = c[:, 1] > tl["lip_lower"][1] - 0.003
+    else:
+        keep = ~((np.abs(c[:, 0]) < 0.004) & (c[:, 1] < tl["subnasale"][1] - 0.002)
+                 & (c[:, 1] > tl["lip_lower"][1] - 0.003) & (c[:, 2] > 0))
+    used, faces = _kept_part(X, tpl.triangles, keep)
+    Y, _, _ = random_pose(X[used], 3, unit=0.001)
+    said = []
+    model, res = build_model((Y, faces), template=tpl, expressions="copy", progress=said.append)
+    fell = {f["landmark"]: f["rule"] for f in res.stats["landmark_fallbacks"]}
+    if damage == "chin cut off":
+        assert {"chin", "neck_start"} <= set(res.stats["off_scan_landmarks"]) and not fell
+        assert any(m.startswith("partial scan: chin, neck_start off the scan") for m in said), said
+    else:
+        assert fell == {"stomion": "no mouth found on the profile at the height of the mouth corners",
+                        "lip_upper": "the stomion fell back: the lip is taken at it",
+                        "lip_lower": "the stomion fell back: the lip is taken at it"}
+        assert ("warning: landmark stomion: no mouth found on the profile at the height of the mouth corners; it "
+                "falls back to the template's landmark carried by the face similarity, and its curves are left "
+                "out") in said
+    A = model.scan_transform
+    truth = onto_part(X, used, Y @ A[:3, :3].T + A[:3, 3])
+    tri, w, _ = closest_points(np.array([tl[k] for k in tl]), tpl.neutral, tpl.triangles)
+    known = dict(zip(tl, np.einsum("nk,nkj->nj", w, truth[tpl.triangles[tri]])))
+    err = {k: np.linalg.norm(res.landmarks[k] - known[k]) * 1000 for k in ("stomion", "mouth_corner_L",
+                                                                           "mouth_corner_R")}
+    assert max(err.values()) < 5.0, err
+    assert res.stats["quality"]["inverted"] == 0
+    r = Simulator(model).solve(activations_for(ACTION_UNITS["lipCornerPull_L"], model.muscles))
+    assert r.converged and r.inverted == 0
 
 
 def _parts_in_front_of_the_skin(model):

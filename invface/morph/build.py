@@ -35,7 +35,7 @@ from .blendshapes import read_blendshapes, recognised
 from .jaw import split_jaw
 from .curves import curve_set
 from .crop import crop_to_head
-from .landmarks import ear_boxes, find_landmarks, template_landmarks
+from .landmarks import FALLBACK, ear_boxes, find_landmarks, template_landmarks
 from .openings import (ACROSS, MAX_INNER_FRACTION, closed_seams, inner_surfaces, lid_pairs, map_openings,
                        opening_centres)
 from .surface import SurfacePoisson, morph_surface
@@ -256,18 +256,21 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
     lap("orient")
 
     say("landmarks (fixed-stencil curvature)")
-    L, off_scan = find_landmarks(Va, Fg, template)
+    L, off_scan, fell = find_landmarks(Va, Fg, template)
     found["landmarks"] = L
     if off_scan:
         say(f"partial scan: {', '.join(off_scan)} off the scan (on its edge); their curves are left out and "
             "the head is completed from the template")
+    for name, rule in fell.items():
+        say(f"warning: landmark {name}: {rule}; it falls back to {FALLBACK}, and its curves are left out")
     lap("landmarks")
 
     say("feature curves")
     Cg = curve_set(Va, Fg, L)
     Ct = curve_set(template.neutral, template.triangles, TL)
-    if off_scan:
-        Ct, Cg = ({k: c for k, c in C.items() if not set(k) & set(off_scan)} for C in (Ct, Cg))
+    left_out = set(off_scan) | set(fell)
+    if left_out:
+        Ct, Cg = ({k: c for k, c in C.items() if not set(k) & left_out} for C in (Ct, Cg))
     found["curves"] = Cg
     lap("curves")
 
@@ -339,7 +342,9 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
         "surface_to_target_mm": {"mean": float(dist.mean() * 1000), "max": float(dist.max() * 1000)},
         "face_to_scan_mm": {"median": float(np.median(face)), "p95": float(np.percentile(face, 95)),
                             "max": float(face.max())},
-        "off_scan_landmarks": list(off_scan), "openings_mapped": opened, "ear_boxes": len(ears), "snapped_fraction": float(surf.snapped.mean()), "inverted_triangles": surf.inverted,
+        "off_scan_landmarks": list(off_scan),
+        "landmark_fallbacks": [{"landmark": k, "rule": r, "fallback": FALLBACK} for k, r in fell.items()],
+        "openings_mapped": opened, "ear_boxes": len(ears), "snapped_fraction": float(surf.snapped.mean()), "inverted_triangles": surf.inverted,
         "triangle_relax_rounds": surf.relax_rounds, "tet_relaxed_vertices": vm.relaxed_vertices, "inner_pushed": vm.pushed,
         "tet_relax_rounds": vm.relax_rounds, "quality": q,
         "centerlines_inside": inside_fraction(model.rest_positions, model.tets,

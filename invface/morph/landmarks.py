@@ -14,6 +14,9 @@ template's face (face_similarity) to the target's closest point, and is then fou
   moved by the offsets already found at the nose tip, bridge, stomion and chin, interpolated
   by height (a real face's proportions differ from the template's by 1-2 cm: on ICT-FaceKit's
   neutral the similarity-carried template eyes sit 17 mm too low);
+- a rule that finds nothing (no chin below the nose, no mouth on the profile, no head sides)
+  does not stop the build: the landmark falls back to its prior, and the build's summary
+  names the landmark and the rule (issue 62); a chin found on a bottom cut is off the scan;
 - eye corners, mouth corners and alar points by curvature-weighted local registration: the
   template's skin within 15 mm of the landmark, each vertex weighted by its fixed-stencil
   feature strength (sec. 6: curvature is what marks these features), is rigidly registered
@@ -51,6 +54,9 @@ HEAD_OUTER = ("top_of_head", "head_extreme_L", "head_extreme_R")   # may be off 
 NECK_DROP = 0.02          # m: the neck start is this far below the chin on the profile
 EDGE_DISTANCE = 0.001     # m: an outer landmark this close to the scan's open edge ...
 PRIOR_GAP = 0.01          # m: ... whose template prior lies this far off the scan is off the scan
+FALLBACK = "the template's landmark carried by the face similarity"
+OPENING_WIDTH = 0.6       # an opening narrower than this share of the carried corners' span is not
+                          # the eye or the mouth (a scanner's hole), and gives no corners
 
 
 _TEMPLATE_POINTS = {}
@@ -60,7 +66,7 @@ def template_landmarks(model):
     """{name: (3,) point} of LANDMARKS on the template: its own landmarks, and the lip points
     (which it does not list) found by the same profile rules as on a target."""
     if id(model) not in _TEMPLATE_POINTS:
-        found, _ = find_landmarks(model.neutral, model.triangles, model)
+        found, _, _ = find_landmarks(model.neutral, model.triangles, model)
         pts = {k: model.neutral[v] for k, v in model.landmarks.items() if k in LANDMARKS}
         _TEMPLATE_POINTS[id(model)] = {k: pts.get(k, found[k]) for k in LANDMARKS}
     return _TEMPLATE_POINTS[id(model)]
@@ -119,13 +125,14 @@ def _register_patch(model, vid, V, F, A, t):
     return barycentric_points(V, F, tri, bw)[0]
 
 
-def _opening(V, loops, center, radius):
+def _opening(V, loops, center, radius, min_width=0.0):
     """Vertex ids of the boundary loop (an opening of the scan) whose centroid lies within
-    ``radius`` of ``center`` (3,), the nearest one; None when there is none."""
+    ``radius`` of ``center`` (3,) and whose width (its x extent) is at least ``min_width``,
+    the nearest one; None when there is none."""
     best, dist = None, radius
     for ids in loops:
         d = np.linalg.norm(V[ids].mean(axis=0) - center)
-        if d < dist and len(ids) >= 6:
+        if d < dist and len(ids) >= 6 and np.ptp(V[ids, 0]) >= min_width:
             best, dist = ids, d
     return best
 
@@ -205,8 +212,15 @@ def _chin(P, tip, prior, drop=0.03, prominence=0.002):
 
 def find_landmarks(V, F, model):
     """Landmarks {name: (3,) point in the model frame} on an aligned target (V (n,3) m in the
-    model frame, F), and the names of those off the scan (a tuple). Raises MeshError when a
-    landmark cannot be placed.
+    model frame, F), the names of those off the scan (a tuple), and the rules that found
+    nothing ({landmark: what the rule could not find}). Raises MeshError only when the
+    alignment itself failed: the profile misses the front of the face or the nose.
+
+    A rule that finds nothing (no chin below the nose on a cropped scan, no mouth on a
+    profile with a hole at the lips, no head sides) does not stop the build: its landmark
+    falls back to the template's, carried by the face similarity and moved by the offsets
+    already found (``fallback``), and its curves are left out of the morph like those of a
+    landmark off the scan.
 
     Partial scans (paper 001 sec. 8.1, a front-of-face scan): the top of the head or a head
     extreme found on the scan's open edge (within EDGE_DISTANCE) while the template's
@@ -223,38 +237,19 @@ def find_landmarks(V, F, model):
     prior = dict(zip(carried, barycentric_points(V, F, tri, w)))
     gap = dict(zip(carried, gap))
     P = profile_curve(V, F, prior["nose_tip"])
-    y, z = P[:, 1], P[:, 2]
-    idx = np.arange(len(P))
-    L = {}
-
-    def window(center, r):
-        return np.linalg.norm(P - center, axis=1) < r
-
-    def reanchor(name, a, b):
-        """prior[name] moved by the found-minus-prior offsets of landmarks a and b,
-        interpolated by height: real faces differ from the template's proportions."""
-        ya, yb = prior[a][1], prior[b][1]
-        r = 0.0 if a == b else float(np.clip((prior[name][1] - ya) / (yb - ya), 0, 1))
-        return prior[name] + (1 - r) * (L[a] - prior[a]) + r * (L[b] - prior[b])
-
-    near_tip = window(prior["nose_tip"], 0.03)
-    if not near_tip.any():
-        raise MeshError("the profile curve misses the nose: the alignment to the template failed")
-    tip = idx[near_tip][np.argmax(z[near_tip])]
-    L["nose_tip"] = P[tip]
-    above = (idx > tip) & window(reanchor("nose_bridge", "nose_tip", "nose_tip"), 0.015)
-    if not above.any():
-        raise MeshError("no nose bridge above the nose tip on the profile")
-    L["nose_bridge"] = P[idx[above][np.argmin(z[above])]]
-    chin = _chin(P, tip, prior["chin"])
-    L["chin"] = P[chin]
+    search = _ProfileSearch(V, F, P, prior, carried, gap)
+    L, fell = search.L, search.fell
+    search.nose()
+    chin = search.chin()
     loops = boundary_loops(F)
 
     def corners(inner, outer, a, b):
         """Both corners of an eye or the mouth: the x-extremes of the scan's opening there
-        when it has one (open eyes, parted lips), else the registered template patches."""
-        p, q = reanchor(inner, a, b), reanchor(outer, a, b)
-        hole = _opening(V, loops, 0.5 * (p + q), 0.5 * np.linalg.norm(p - q) + 0.005)
+        when it has one (open eyes, parted lips) as wide as the carried corners' span, else
+        the registered template patches."""
+        p, q = search.reanchor(inner, a, b), search.reanchor(outer, a, b)
+        span = np.linalg.norm(p - q)
+        hole = _opening(V, loops, 0.5 * (p + q), 0.5 * span + 0.005, min_width=OPENING_WIDTH * span)
         if hole is not None:
             # eye: inner/outer = nearest/farthest from the symmetry plane; mouth: left/right
             ax = np.abs(V[hole, 0]) if p[0] * q[0] > 0 else V[hole, 0] * np.sign(q[0] - p[0])
@@ -265,49 +260,169 @@ def find_landmarks(V, F, model):
 
     corners("eye_inner_L", "eye_outer_L", "nose_bridge", "nose_bridge")
     corners("eye_inner_R", "eye_outer_R", "nose_bridge", "nose_bridge")
-    L["stomion"] = reanchor("stomion", "nose_tip", "chin")     # the prior; found below
+    L["stomion"] = search.reanchor("stomion", "nose_tip", "chin")     # the prior; found below
     for name in ("alar_L", "alar_R"):
-        shift = reanchor(name, "nose_tip", "stomion") - prior[name]
+        shift = search.reanchor(name, "nose_tip", "stomion") - prior[name]
         L[name] = _register_patch(model, model.landmarks[name], V, F, A, t + shift)
     corners("mouth_corner_L", "mouth_corner_R", "stomion", "stomion")
-    # mouth: stomion at the corners' height, lips either side
-    my = 0.5 * (L["mouth_corner_L"][1] + L["mouth_corner_R"][1])
-    mouth = (idx < tip) & (idx > chin) & (np.abs(y - my) < 0.006)
-    if not mouth.any():
-        raise MeshError("no mouth found on the profile at the height of the mouth corners")
-    # the deepest notch of the profile seen from the front: each candidate's depth is the
-    # frontmost profile point at its height, so an open mouth's inner lips do not count
-    front = _front_depth(P[chin:tip + 1], y[mouth])
-    stom = idx[mouth][np.argmin(front)]
-    L["stomion"] = P[stom]
-    between = ((idx < tip) & (idx > stom) & (y > P[stom, 1] + 0.006)
-               & window(reanchor("subnasale", "nose_tip", "stomion"), 0.01))
-    sub = idx[between][np.argmax(profile_concavity(P, idx[between]))] if between.any() else tip
-    L["subnasale"] = P[sub]
-    up = (idx > stom) & (idx < sub)
-    L["lip_upper"] = P[idx[up][np.argmax(z[up])]] if up.any() else P[stom]
-    lo = (idx < stom) & (idx > chin)
-    L["lip_lower"] = P[idx[lo][np.argmax(z[lo])]] if lo.any() else P[stom]
-    neck = idx[(idx <= chin)]
-    L["neck_start"] = P[neck[np.argmin(np.abs(y[neck] - (P[chin, 1] - NECK_DROP)))]]
-    L["top_of_head"] = P[np.argmax(y)]
-    band = (V[:, 1] > L["chin"][1]) & (np.abs(V[:, 1] - prior["head_extreme_L"][1]) < 0.03)
-    if not band.any():
-        raise MeshError("no head sides found above the chin")
-    bid = np.flatnonzero(band)
-    bid = bid[~_ears(V, F, bid)]
-    L["head_extreme_L"] = V[bid[np.argmax(V[bid, 0])]]
-    L["head_extreme_R"] = V[bid[np.argmin(V[bid, 0])]]
-    off = []
-    E = boundary_edges(F)
-    if len(E):
-        a, ab = V[E[:, 0]], V[E[:, 1]] - V[E[:, 0]]                  # open-edge segments
-        Q = np.array([L[k] for k in HEAD_OUTER])[:, None]
-        s = np.clip(np.einsum("ij,nij->ni", ab, Q - a) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-30), 0, 1)
-        d = np.linalg.norm(a + s[..., None] * ab - Q, axis=2).min(1)
-        off = [k for k, dk in zip(HEAD_OUTER, d) if dk < EDGE_DISTANCE and gap[k] > PRIOR_GAP]
+    search.mouth(chin)
+    search.neck_and_top(chin)
+    search.head_sides()
+    off = search.off + _off_scan(V, F, L, gap)
     if L["neck_start"][1] > L["chin"][1] - 0.5 * NECK_DROP:           # the profile ends above it
         off.append("neck_start")
     for k in off:
-        L[k] = carried[k]
-    return {k: np.asarray(L[k], float) for k in LANDMARKS}, tuple(off)
+        L[k] = L[k] if k == "chin" else carried[k]
+    return {k: np.asarray(L[k], float) for k in LANDMARKS}, tuple(off), dict(fell)
+
+
+class _ProfileSearch:
+    """The profile rules of ``find_landmarks`` on the profile P (n,3, bottom to top) of an
+    aligned target (V, F), from the priors ({name: (3,)}: the carried template landmarks
+    projected onto the target; ``carried``: before the projection; ``gap``: how far off the
+    target, m). Fills ``L`` {name: (3,)}, ``fell`` {name: the rule's failure} for the
+    landmarks that fell back, and ``off``: those found off a cropped scan."""
+
+    def __init__(self, V, F, P, prior, carried, gap):
+        self.V, self.F, self.P, self.prior, self.carried, self.gap = V, F, P, prior, carried, gap
+        self.idx = np.arange(len(P))
+        self.L, self.fell, self.off = {}, {}, []
+
+    def window(self, center, r):
+        return np.linalg.norm(self.P - center, axis=1) < r
+
+    def reanchor(self, name, a, b):
+        """prior[name] moved by the found-minus-prior offsets of landmarks a and b,
+        interpolated by height: real faces differ from the template's proportions."""
+        prior, L = self.prior, self.L
+        ya, yb = prior[a][1], prior[b][1]
+        r = 0.0 if a == b else float(np.clip((prior[name][1] - ya) / (yb - ya), 0, 1))
+        return prior[name] + (1 - r) * (L[a] - prior[a]) + r * (L[b] - prior[b])
+
+    def fallback(self, name, point, rule):
+        """Landmark ``name`` set to ``point`` (3,) (the template's, carried and reanchored)
+        projected onto the target when it lies within PRIOR_GAP of it, else left where it
+        is (off a cropped scan); ``rule`` is recorded. Returns the profile index nearest it."""
+        tri, w, d = closest_points(point[None], self.V, self.F)
+        if d[0] < PRIOR_GAP:
+            self.L[name] = barycentric_points(self.V, self.F, tri, w)[0]
+        else:
+            self._off_the_scan(name, point)
+        self.fell[name] = rule
+        return int(np.argmin(np.linalg.norm(self.P - self.L[name], axis=1)))
+
+    def _off_the_scan(self, name, point):
+        """Landmark ``name`` at ``point`` (3,) off the scan; its prior becomes the carried
+        landmark itself (not its projection onto the scan's edge), so that the offsets the
+        other priors are moved by (``reanchor``) are those of the face, not of the crop."""
+        self.L[name] = point
+        if name in self.carried:
+            self.prior[name] = self.carried[name]
+
+    def nose(self):
+        """The nose tip (the most forward point near its prior; none: the alignment failed)
+        and the bridge (the deepest point above it)."""
+        P, idx, L = self.P, self.idx, self.L
+        near_tip = self.window(self.prior["nose_tip"], 0.03)
+        if not near_tip.any():
+            raise MeshError("the profile curve misses the nose: the alignment to the template failed")
+        self.tip = idx[near_tip][np.argmax(P[near_tip, 2])]
+        L["nose_tip"] = P[self.tip]
+        above = (idx > self.tip) & self.window(self.reanchor("nose_bridge", "nose_tip", "nose_tip"), 0.015)
+        if above.any():
+            L["nose_bridge"] = P[idx[above][np.argmin(P[above, 2])]]
+        else:
+            self.fallback("nose_bridge", self.reanchor("nose_bridge", "nose_tip", "nose_tip"),
+                          "no nose bridge above the nose tip on the profile")
+
+    def chin(self):
+        """The chin (``_chin``) and its profile index. A chin found on the scan's open edge
+        while the carried one lies off the scan is where a scan cut below the mouth stops: the
+        chin is off the scan (``off``) and takes the carried one, moved with the nose tip. A
+        profile that ends too close below the nose for the rule falls back to the same."""
+        carried = self.carried["chin"] + self.L["nose_tip"] - self.prior["nose_tip"]
+        try:
+            chin = _chin(self.P, self.tip, self.prior["chin"])
+        except MeshError as e:
+            return self.fallback("chin", carried, str(e))
+        ends = self.P[:, 1].min() > self.P[chin, 1] - 0.5 * NECK_DROP       # no profile below it
+        if ends and self.gap["chin"] > PRIOR_GAP and _edge_distance(self.V, self.F, self.P[chin][None])[0] < EDGE_DISTANCE:
+            self.off.append("chin")
+            self._off_the_scan("chin", carried)
+        else:
+            self.L["chin"] = self.P[chin]
+        return chin
+
+    def mouth(self, chin):
+        """The stomion (the deepest notch of the profile seen from the front, at the mouth
+        corners' height), the subnasale (the sharpest concave corner between it and the
+        nose tip) and the lips (the most forward points either side of the stomion)."""
+        P, idx, L, tip = self.P, self.idx, self.L, self.tip
+        y, z = P[:, 1], P[:, 2]
+        my = 0.5 * (L["mouth_corner_L"][1] + L["mouth_corner_R"][1])
+        mouth = (idx < tip) & (idx > chin) & (np.abs(y - my) < 0.006)
+        if mouth.any():
+            # each candidate's depth is the frontmost profile point at its height, so an open
+            # mouth's inner lips do not count
+            front = _front_depth(P[chin:tip + 1], y[mouth])
+            stom = idx[mouth][np.argmin(front)]
+            L["stomion"] = P[stom]
+        else:
+            stom = self.fallback("stomion", L["stomion"],
+                                 "no mouth found on the profile at the height of the mouth corners")
+        sub_prior = self.reanchor("subnasale", "nose_tip", "stomion")
+        between = ((idx < tip) & (idx > stom) & (y > L["stomion"][1] + 0.006) & self.window(sub_prior, 0.01))
+        if between.any():
+            sub = idx[between][np.argmax(profile_concavity(P, idx[between]))]
+            L["subnasale"] = P[sub]
+        else:
+            sub = self.fallback("subnasale", sub_prior, "no concave corner between the nose tip and the mouth "
+                                "on the profile")
+        for name, side in (("lip_upper", (idx > stom) & (idx < sub)), ("lip_lower", (idx < stom) & (idx > chin))):
+            if "stomion" in self.fell:
+                self.fallback(name, L["stomion"], "the stomion fell back: the lip is taken at it")
+            elif side.any():
+                L[name] = P[idx[side][np.argmax(z[side])]]
+            else:
+                self.fallback(name, L["stomion"], f"no profile between the stomion and the "
+                              f"{'subnasale' if name == 'lip_upper' else 'chin'}: the lip is the stomion")
+
+    def neck_and_top(self, chin):
+        """The neck start (NECK_DROP below the chin on the profile) and the top of the head."""
+        P, idx = self.P, self.idx
+        neck = idx[idx <= chin]
+        self.L["neck_start"] = P[neck[np.argmin(np.abs(P[neck, 1] - (self.L["chin"][1] - NECK_DROP)))]]
+        self.L["top_of_head"] = P[np.argmax(P[:, 1])]
+
+    def head_sides(self):
+        """The left/right extremes of the head above the chin at the carried extremes' height,
+        the ears left out."""
+        V, F, L = self.V, self.F, self.L
+        band = (V[:, 1] > L["chin"][1]) & (np.abs(V[:, 1] - self.prior["head_extreme_L"][1]) < 0.03)
+        bid = np.flatnonzero(band)
+        bid = bid[~_ears(V, F, bid)]
+        if not len(bid):
+            for name in ("head_extreme_L", "head_extreme_R"):
+                self.fallback(name, self.carried[name], "no head sides found above the chin")
+            return
+        L["head_extreme_L"] = V[bid[np.argmax(V[bid, 0])]]
+        L["head_extreme_R"] = V[bid[np.argmin(V[bid, 0])]]
+
+
+def _edge_distance(V, F, Q):
+    """(k,) m: each point Q (k,3) from the open edge of the scan (V, F); inf without one."""
+    E = boundary_edges(F)
+    if not len(E):
+        return np.full(len(Q), np.inf)
+    a, ab = V[E[:, 0]], V[E[:, 1]] - V[E[:, 0]]                  # open-edge segments
+    Q = np.asarray(Q, float)[:, None]
+    s = np.clip(np.einsum("ij,nij->ni", ab, Q - a) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-30), 0, 1)
+    return np.linalg.norm(a + s[..., None] * ab - Q, axis=2).min(1)
+
+
+def _off_scan(V, F, L, gap):
+    """HEAD_OUTER landmarks (in ``L``) within EDGE_DISTANCE of the scan's (V, F) open edge
+    whose carried template landmark lies more than PRIOR_GAP off the scan (``gap`` {name: m}):
+    where a partial scan stops, not where the head does."""
+    d = _edge_distance(V, F, np.array([L[k] for k in HEAD_OUTER]))
+    return [k for k, dk in zip(HEAD_OUTER, d) if dk < EDGE_DISTANCE and gap[k] > PRIOR_GAP]

@@ -67,6 +67,8 @@ class ModelBuild:
                              f"max {f['max']:.2f} mm; {100 * st['snapped_fraction']:.1f}% of the template skin "
                              "snapped onto the scan")
             lines += [f"cleaning: {n}" for n in st.get("cleaning", [])]
+            lines += [f"warning: landmark {f['landmark']}: {f['rule']}; it fell back to {f['fallback']}"
+                      for f in st.get("landmark_fallbacks", [])]
         s = self.model.summary()
         lines += [f"surface: {s['surface_vertices']} vertices, {s['surface_triangles']} triangles; "
                   f"blendshapes: {s['blendshapes']}; skin embedding: {s['skin_embedding']}",
