@@ -8,7 +8,8 @@ Per scan: the unit found, seconds per stage, the share of the template skin snap
 scan, the skin-to-scan distance on the face (median / 95th percentile / max, mm: every skin
 vertex of the face region, snapped or filled), inverted tets, the minimum radius ratio, and,
 for ICT-FaceKit (68 annotated landmark vertices), the errors of the eye corners, mouth corners,
-nose tip, subnasale and chin. Writes one contact sheet of all builds (the scan with its
+nose tip, subnasale and chin, and the landmarks whose rule found nothing (issue 62: they fall
+back to the template's). Writes one contact sheet of all builds (the scan with its
 landmarks and curves, the neutral, front and 3/4) to OUT/contact_sheet.png.
 """
 from __future__ import annotations
@@ -63,6 +64,7 @@ def run(name, source, template, expressions, annotated=None):
            "face_to_scan_mm": [round(f["median"], 2), round(f["p95"], 2), round(f["max"], 2)],
            "inverted_tets": st["quality"]["inverted"], "min_radius_ratio": round(st["quality"]["min_radius_ratio"], 4),
            "off_scan": st["off_scan_landmarks"], "openings_mapped": st["openings_mapped"],
+           "fallbacks": {f["landmark"]: f["rule"] for f in st.get("landmark_fallbacks", [])},
            "cleaning": st["cleaning"]}
     if annotated is not None:
         V = np.asarray(source[0], float)
@@ -114,16 +116,17 @@ def main():
         print(json.dumps(row), flush=True)
         if model is not None:
             built.append((name, model, res))
-    print("\n| scan | unit | seconds | snapped | face to scan mm (median / 95th / max) | inverted | min radius ratio | landmarks mm (median / max) |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("\n| scan | unit | seconds | snapped | face to scan mm (median / 95th / max) | inverted | min radius ratio | landmarks mm (median / max) | rules fallen back |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         if "error" in r:
-            print(f"| {r['scan']} | failed: {r['error']} | {r['seconds']} | | | | | |")
+            print(f"| {r['scan']} | failed: {r['error']} | {r['seconds']} | | | | | | |")
             continue
         lm = r.get("landmark_mm")
         lms = f"{np.median(list(lm.values())):.1f} / {max(lm.values()):.1f}" if lm else "-"
         print(f"| {r['scan']} | {r['unit']} | {r['seconds']} | {r['snapped']:.0%} | "
-              f"{' / '.join(str(x) for x in r['face_to_scan_mm'])} | {r['inverted_tets']} | {r['min_radius_ratio']} | {lms} |")
+              f"{' / '.join(str(x) for x in r['face_to_scan_mm'])} | {r['inverted_tets']} | {r['min_radius_ratio']} | {lms} | "
+              f"{', '.join(r['fallbacks']) or 'none'} |")
     lms = [v for r in rows for v in r.get("landmark_mm", {}).values()]
     if lms:
         print(f"ICT landmarks over {len(lms)} points: median {np.median(lms):.2f} mm, max {max(lms):.2f} mm")

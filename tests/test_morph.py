@@ -205,6 +205,34 @@ def test_a_damaged_scan_builds_and_simulates(small_expressive_model, damage):
     assert r.converged and r.inverted == 0
 
 
+@pytest.mark.parametrize("seed", [3, 13])
+def test_ict_identity_mix_eye_corners(small_model, seed):
+    """Faces of ICT-FaceKit's identity space (20 shapes, coefficients ~ N(0, 1.5^2), seeded as in
+    bench/identity_3d.py) whose profile has no dip at the nose bridge (face 13's forehead
+    slopes on back from the nose) or whose face similarity carries the bridge off the midline:
+    the bridge was the search window's edge, 20 mm above the eyes, and the eye priors moved
+    with it missed the eye openings (eye corners 20-32 mm from ICT's annotated ones). The
+    bridge is now the profile's sharpest concave bend there, the paired priors are mirror
+    images, a midline offset moves nothing sideways, and an opening is also looked for where
+    the similarity alone puts it: every eye corner within 3 mm."""
+    from conftest import ICT
+    from invface.io.meshes import read_mesh
+    from invface.morph.build import orient_target
+    if not (ICT / "identities.npz").exists():
+        pytest.skip("ICT-FaceKit data (../shared/data/ict-facekit) is not available")
+    import json
+    V, F = read_mesh(ICT / "neutral.obj")
+    S = np.load(ICT / "identities.npz")["deltas"]
+    mix = V + np.tensordot(np.random.default_rng(seed).normal(0, 1.5, len(S)), S, axes=1)
+    annotated = json.load(open(ICT / "landmarks.json"))["landmarks_68_multipie"]
+    target, al, _, _ = orient_target(clean(mix, F, unit="cm"), small_model, "cm")
+    L, off, fell = find_landmarks(al.apply(target.vertices), target.faces, small_model)
+    corners = {"eye_outer_R": 36, "eye_inner_R": 39, "eye_inner_L": 42, "eye_outer_L": 45}
+    err = {k: np.linalg.norm(L[k] - al.apply(mix[annotated[i]] * 0.01)) * 1000 for k, i in corners.items()}
+    assert max(err.values()) < 3.0, err
+    assert not off and not fell
+
+
 def _parts_in_front_of_the_skin(model):
     """Pixels of a front view at rest where an inner part pokes through the skin (seen where
     the skin alone would be)."""

@@ -202,6 +202,35 @@ def build_model(neutral, blendshapes=None, template=None, unit=None, expressions
         raise BuildFailed(f"the build stopped in its {stage} stage: {e}", stage, found) from None
 
 
+def orient_target(target, template, unit=None, say=None):
+    """The orient stage of ``build_model`` on a cleaned Target: orientation, symmetry plane,
+    alignment to the template and the unit from the face (``units.settle_unit``), the head
+    cropped (``crop.crop_to_head``) and the inner lips and lids behind the openings left out.
+    Returns (target, alignment: ``al.apply`` maps it into the model frame, scaling, the hidden
+    scalp). Raises MeshError when the scan does not align to the template's face."""
+    say = say or (lambda m: None)
+    say("orientation, symmetry plane, alignment to the template and the unit (from the face)")
+    target, al, scaling = settle_unit(target, template, unit, progress=say)
+    if al.residual > 0.01:
+        raise MeshError(f"{target.name}: after alignment the scan lies {al.residual * 1000:.1f} mm (median) from "
+                        "the template's face; it does not look like a face, or too little of one")
+    target = replace(target, unit=scaling.unit)
+    cropped, hidden = crop_to_head(target, al.apply(target.vertices), template, *scaling.similarity)
+    for note in cropped.notes[len(target.notes):]:
+        say(note)
+    target = cropped
+    TL = template_landmarks(template)
+    inner = inner_surfaces(al.apply(target.vertices), target.faces, opening_centres(TL))
+    if inner.mean() > MAX_INNER_FRACTION:
+        say(f"{inner.mean():.0%} of the scan is hidden behind its openings: too much to be inner lips and "
+            "lids, all kept")
+    elif inner.any():
+        target = drop_faces(target, inner, f"left out {int(inner.sum())} triangles of the inner lips and lids, "
+                                           "hidden behind the lip and lid lines")
+        say(target.notes[-1])
+    return target, al, scaling, hidden
+
+
 def _build(neutral, blendshapes, template, unit, expressions, progress, secs, found):
     """build_model's stages; ``secs`` gets each finished stage's seconds and ``found`` what
     was found so far (for a failure's preview)."""
@@ -232,25 +261,8 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
     lap("clean")
     say(f"target: {len(target.vertices)} vertices" + (f" ({'; '.join(target.notes)})" if target.notes else ""))
 
-    say("orientation, symmetry plane, alignment to the template and the unit (from the face)")
-    target, al, scaling = settle_unit(target, template, unit, progress=say)
-    if al.residual > 0.01:
-        raise MeshError(f"{target.name}: after alignment the scan lies {al.residual * 1000:.1f} mm (median) from "
-                        "the template's face; it does not look like a face, or too little of one")
-    target = replace(target, unit=scaling.unit)
-    cropped, hidden = crop_to_head(target, al.apply(target.vertices), template, *scaling.similarity)
-    for note in cropped.notes[len(target.notes):]:
-        say(note)
-    target = cropped
+    target, al, scaling, hidden = orient_target(target, template, unit, say)
     TL = template_landmarks(template)
-    inner = inner_surfaces(al.apply(target.vertices), target.faces, opening_centres(TL))
-    if inner.mean() > MAX_INNER_FRACTION:
-        say(f"{inner.mean():.0%} of the scan is hidden behind its openings: too much to be inner lips and "
-            "lids, all kept")
-    elif inner.any():
-        target = drop_faces(target, inner, f"left out {int(inner.sum())} triangles of the inner lips and lids, "
-                                           "hidden behind the lip and lid lines")
-        say(target.notes[-1])
     Va, Fg = al.apply(target.vertices), target.faces
     found.update(target=target, aligned=Va)
     lap("orient")

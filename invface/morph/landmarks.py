@@ -5,7 +5,8 @@ landmark starts from a prior, the template's landmark carried by a similarity fi
 template's face (face_similarity) to the target's closest point, and is then found by the paper's rule for it:
 
 - on the profile curve (mesh ∩ symmetry plane): the nose tip (most forward point), the nose
-  bridge (the deepest point above the tip), the subnasale (the sharpest concave corner
+  bridge (the deepest point above the tip; where the forehead slopes on back with no dip,
+  the sharpest concave bend), the subnasale (the sharpest concave corner
   between tip and mouth), the upper and lower lip (most forward points either side of the
   stomion), the chin (the first down-and-forward extreme below the nose), the neck start
   (2 cm below the chin) and the top of the head (the highest point);
@@ -55,6 +56,9 @@ NECK_DROP = 0.02          # m: the neck start is this far below the chin on the 
 EDGE_DISTANCE = 0.001     # m: an outer landmark this close to the scan's open edge ...
 PRIOR_GAP = 0.01          # m: ... whose template prior lies this far off the scan is off the scan
 FALLBACK = "the template's landmark carried by the face similarity"
+MIDLINE_SHIFT = np.array([0.0, 1.0, 1.0])   # the part of a midline landmark's offset that moves others
+BRIDGE_BEND = 0.006       # m: where the profile has no dip at the nose bridge, the bridge is its
+                          # sharpest concave bend over this arc either side
 OPENING_WIDTH = 0.6       # an opening narrower than this share of the carried corners' span is not
                           # the eye or the mouth (a scanner's hole), and gives no corners
 
@@ -231,7 +235,7 @@ def find_landmarks(V, F, model):
     its neck start, so no edge test there). Such a landmark keeps that prior, and its curves
     are left out of the morph (``build_model``), which completes the head from the template."""
     A, t = face_similarity(model, V, F)
-    carried = {k: A @ model.neutral[v] + t for k, v in model.landmarks.items() if k in LANDMARKS}
+    carried = _symmetric({k: A @ model.neutral[v] + t for k, v in model.landmarks.items() if k in LANDMARKS})
     # priors: the carried landmarks projected onto the target surface (gap: how far off it)
     tri, w, gap = closest_points(np.array(list(carried.values())), V, F)
     prior = dict(zip(carried, barycentric_points(V, F, tri, w)))
@@ -245,11 +249,15 @@ def find_landmarks(V, F, model):
 
     def corners(inner, outer, a, b):
         """Both corners of an eye or the mouth: the x-extremes of the scan's opening there
-        when it has one (open eyes, parted lips) as wide as the carried corners' span, else
-        the registered template patches."""
+        when it has one (open eyes, parted lips) as wide as the carried corners' span, near
+        the corners' priors moved with landmarks a and b or else near the priors themselves;
+        without one, the registered template patches."""
         p, q = search.reanchor(inner, a, b), search.reanchor(outer, a, b)
         span = np.linalg.norm(p - q)
-        hole = _opening(V, loops, 0.5 * (p + q), 0.5 * span + 0.005, min_width=OPENING_WIDTH * span)
+        hole = None
+        for c in (0.5 * (p + q), 0.5 * (prior[inner] + prior[outer])):    # moved with a, b, else as carried
+            hole = hole if hole is not None else _opening(V, loops, c, 0.5 * span + 0.005,
+                                                           min_width=OPENING_WIDTH * span)
         if hole is not None:
             # eye: inner/outer = nearest/farthest from the symmetry plane; mouth: left/right
             ax = np.abs(V[hole, 0]) if p[0] * q[0] > 0 else V[hole, 0] * np.sign(q[0] - p[0])
@@ -276,6 +284,22 @@ def find_landmarks(V, F, model):
     return {k: np.asarray(L[k], float) for k in LANDMARKS}, tuple(off), dict(fell)
 
 
+def _symmetric(points):
+    """{name: (3,)} with each _L/_R pair made mirror images about the symmetry plane x = 0
+    (the target is aligned to it): the pair's mean height and depth and mean distance from
+    the plane; the others, on the midline, put on the plane. A face similarity fitted with a
+    slight yaw carried the nose bridge 7 mm off the plane, and the eyes' priors, moved by the
+    bridge's offset, 13 and 20 mm from their openings."""
+    out = {k: p * [0.0, 1.0, 1.0] if not k.endswith(("_L", "_R")) else p for k, p in points.items()}
+    for k in points:
+        if k.endswith("_L") and k[:-2] + "_R" in points:
+            a, b = points[k], points[k[:-2] + "_R"]
+            m = 0.5 * (a + b)
+            half = 0.5 * (a[0] - b[0])
+            out[k], out[k[:-2] + "_R"] = np.array([half, m[1], m[2]]), np.array([-half, m[1], m[2]])
+    return out
+
+
 class _ProfileSearch:
     """The profile rules of ``find_landmarks`` on the profile P (n,3, bottom to top) of an
     aligned target (V, F), from the priors ({name: (3,)}: the carried template landmarks
@@ -297,7 +321,8 @@ class _ProfileSearch:
         prior, L = self.prior, self.L
         ya, yb = prior[a][1], prior[b][1]
         r = 0.0 if a == b else float(np.clip((prior[name][1] - ya) / (yb - ya), 0, 1))
-        return prior[name] + (1 - r) * (L[a] - prior[a]) + r * (L[b] - prior[b])
+        shift = (1 - r) * (L[a] - prior[a]) + r * (L[b] - prior[b])
+        return prior[name] + shift * MIDLINE_SHIFT       # a, b on the midline: no sideways offset
 
     def fallback(self, name, point, rule):
         """Landmark ``name`` set to ``point`` (3,) (the template's, carried and reanchored)
@@ -330,10 +355,22 @@ class _ProfileSearch:
         L["nose_tip"] = P[self.tip]
         above = (idx > self.tip) & self.window(self.reanchor("nose_bridge", "nose_tip", "nose_tip"), 0.015)
         if above.any():
-            L["nose_bridge"] = P[idx[above][np.argmin(P[above, 2])]]
+            cand = idx[above]
+            k = cand[np.argmin(P[cand, 2])]
+            if self._recedes_above(k):       # no dip: a forehead that slopes on back from the nose
+                k = cand[np.argmax(profile_concavity(P, cand, h=BRIDGE_BEND))]
+            L["nose_bridge"] = P[k]
         else:
             self.fallback("nose_bridge", self.reanchor("nose_bridge", "nose_tip", "nose_tip"),
                           "no nose bridge above the nose tip on the profile")
+
+    def _recedes_above(self, k, reach=0.01, depth=0.0005):
+        """Whether the profile above point k goes on back from it: within ``reach`` (m) above
+        it, a point more than ``depth`` (m) behind it. The deepest point of a search window
+        is then only the window's edge, not a dip."""
+        P = self.P
+        above = (self.idx > k) & (P[:, 1] < P[k, 1] + reach)
+        return bool(above.any() and P[above, 2].min() < P[k, 2] - depth)
 
     def chin(self):
         """The chin (``_chin``) and its profile index. A chin found on the scan's open edge
