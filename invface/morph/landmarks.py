@@ -56,7 +56,6 @@ NECK_DROP = 0.02          # m: the neck start is this far below the chin on the 
 EDGE_DISTANCE = 0.001     # m: an outer landmark this close to the scan's open edge ...
 PRIOR_GAP = 0.01          # m: ... whose template prior lies this far off the scan is off the scan
 FALLBACK = "the template's landmark carried by the face similarity"
-MIDLINE_SHIFT = np.array([0.0, 1.0, 1.0])   # the part of a midline landmark's offset that moves others
 BRIDGE_BEND = 0.006       # m: where the profile has no dip at the nose bridge, the bridge is its
                           # sharpest concave bend over this arc either side
 OPENING_WIDTH = 0.6       # an opening narrower than this share of the carried corners' span is not
@@ -235,7 +234,7 @@ def find_landmarks(V, F, model):
     its neck start, so no edge test there). Such a landmark keeps that prior, and its curves
     are left out of the morph (``build_model``), which completes the head from the template."""
     A, t = face_similarity(model, V, F)
-    carried = _symmetric({k: A @ model.neutral[v] + t for k, v in model.landmarks.items() if k in LANDMARKS})
+    carried = {k: A @ model.neutral[v] + t for k, v in model.landmarks.items() if k in LANDMARKS}
     # priors: the carried landmarks projected onto the target surface (gap: how far off it)
     tri, w, gap = closest_points(np.array(list(carried.values())), V, F)
     prior = dict(zip(carried, barycentric_points(V, F, tri, w)))
@@ -284,22 +283,6 @@ def find_landmarks(V, F, model):
     return {k: np.asarray(L[k], float) for k in LANDMARKS}, tuple(off), dict(fell)
 
 
-def _symmetric(points):
-    """{name: (3,)} with each _L/_R pair made mirror images about the symmetry plane x = 0
-    (the target is aligned to it): the pair's mean height and depth and mean distance from
-    the plane; the others, on the midline, put on the plane. A face similarity fitted with a
-    slight yaw carried the nose bridge 7 mm off the plane, and the eyes' priors, moved by the
-    bridge's offset, 13 and 20 mm from their openings."""
-    out = {k: p * [0.0, 1.0, 1.0] if not k.endswith(("_L", "_R")) else p for k, p in points.items()}
-    for k in points:
-        if k.endswith("_L") and k[:-2] + "_R" in points:
-            a, b = points[k], points[k[:-2] + "_R"]
-            m = 0.5 * (a + b)
-            half = 0.5 * (a[0] - b[0])
-            out[k], out[k[:-2] + "_R"] = np.array([half, m[1], m[2]]), np.array([-half, m[1], m[2]])
-    return out
-
-
 class _ProfileSearch:
     """The profile rules of ``find_landmarks`` on the profile P (n,3, bottom to top) of an
     aligned target (V, F), from the priors ({name: (3,)}: the carried template landmarks
@@ -321,8 +304,7 @@ class _ProfileSearch:
         prior, L = self.prior, self.L
         ya, yb = prior[a][1], prior[b][1]
         r = 0.0 if a == b else float(np.clip((prior[name][1] - ya) / (yb - ya), 0, 1))
-        shift = (1 - r) * (L[a] - prior[a]) + r * (L[b] - prior[b])
-        return prior[name] + shift * MIDLINE_SHIFT       # a, b on the midline: no sideways offset
+        return prior[name] + (1 - r) * (L[a] - prior[a]) + r * (L[b] - prior[b])
 
     def fallback(self, name, point, rule):
         """Landmark ``name`` set to ``point`` (3,) (the template's, carried and reanchored)
