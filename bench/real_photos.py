@@ -1,8 +1,8 @@
 """The real photos end to end (issue 26): one ``fit-plate`` command per photo, both model kinds.
 
-    python bench/real_photos.py OUT [--photos DIR] [--report-only]
+    python bench/real_photos.py OUT [--photos DIR] [--model-kind both] [--report-only]
 
-Runs ``invface fit-plate PHOTO --model-kind both -o OUT/<name>`` for every JPEG/PNG in DIR
+Runs ``invface fit-plate PHOTO --model-kind both -o OUT/<name>`` (or one kind) for every JPEG/PNG in DIR
 (default ``../shared/data/real/photos``), then prints per photo and kind: curve RMS (px), curves
 within 2 px, the fit's seconds, the lips' volume change, the image RMS (linear) in the mouth
 (inside the outer lip curves) and over the face (``mouth_rms.py``), the blendshape weights above
@@ -64,6 +64,7 @@ def main():
     ap.add_argument("out", type=Path)
     ap.add_argument("--photos", type=Path, default=PHOTOS)
     ap.add_argument("--report-only", action="store_true")
+    ap.add_argument("--model-kind", default="both", choices=("both", "blendshape", "simulation"))
     a = ap.parse_args()
     if not a.report_only:
         photos = sorted(p for p in a.photos.iterdir() if p.suffix.lower() in (".jpg", ".jpeg", ".png"))
@@ -73,7 +74,7 @@ def main():
         for p in photos:
             t = time.perf_counter()
             with open(a.out / f"{p.stem}.log", "w") as log:
-                rc = subprocess.call(["invface", "fit-plate", str(p), "--model-kind", "both", "-o", str(a.out / p.stem)],
+                rc = subprocess.call(["invface", "fit-plate", str(p), "--model-kind", a.model_kind, "-o", str(a.out / p.stem)],
                                      stdout=log, stderr=subprocess.STDOUT)
             print(f"{p.stem}: exit {rc}, {time.perf_counter() - t:.0f} s wall", flush=True)
     table(a.out)
