@@ -209,11 +209,10 @@ def test_a_damaged_scan_builds_and_simulates(small_expressive_model, damage):
 def test_ict_identity_mix_eye_corners(small_model, seed):
     """Faces of ICT-FaceKit's identity space (20 shapes, coefficients ~ N(0, 1.5^2), seeded as in
     bench/identity_3d.py) whose profile has no dip at the nose bridge (their foreheads slope
-    on back from the nose): the bridge was the search window's edge, 20 mm above the eyes,
-    and the eye priors moved with it missed the eye openings (eye corners 20-32 mm from ICT's
-    annotated ones). The bridge is now the profile's sharpest concave bend there, and an
-    opening is also looked for where the similarity alone puts it: every eye corner within
-    3 mm."""
+    on back from the nose): the bridge is the search window's edge, 20 mm above the eyes, and
+    the eye priors moved with it miss the eye openings (eye corners were 20-32 mm from ICT's
+    annotated ones). An opening is now also looked for where the similarity alone puts it:
+    every eye corner within 3 mm."""
     from conftest import ICT
     from invface.io.meshes import read_mesh
     from invface.morph.build import orient_target

@@ -5,8 +5,7 @@ landmark starts from a prior, the template's landmark carried by a similarity fi
 template's face (face_similarity) to the target's closest point, and is then found by the paper's rule for it:
 
 - on the profile curve (mesh ∩ symmetry plane): the nose tip (most forward point), the nose
-  bridge (the deepest point above the tip; where the forehead slopes on back with no dip,
-  the sharpest concave bend), the subnasale (the sharpest concave corner
+  bridge (the deepest point above the tip), the subnasale (the sharpest concave corner
   between tip and mouth), the upper and lower lip (most forward points either side of the
   stomion), the chin (the first down-and-forward extreme below the nose), the neck start
   (2 cm below the chin) and the top of the head (the highest point);
@@ -56,8 +55,6 @@ NECK_DROP = 0.02          # m: the neck start is this far below the chin on the 
 EDGE_DISTANCE = 0.001     # m: an outer landmark this close to the scan's open edge ...
 PRIOR_GAP = 0.01          # m: ... whose template prior lies this far off the scan is off the scan
 FALLBACK = "the template's landmark carried by the face similarity"
-BRIDGE_BEND = 0.006       # m: where the profile has no dip at the nose bridge, the bridge is its
-                          # sharpest concave bend over this arc either side
 OPENING_WIDTH = 0.6       # an opening narrower than this share of the carried corners' span is not
                           # the eye or the mouth (a scanner's hole), and gives no corners
 
@@ -337,22 +334,10 @@ class _ProfileSearch:
         L["nose_tip"] = P[self.tip]
         above = (idx > self.tip) & self.window(self.reanchor("nose_bridge", "nose_tip", "nose_tip"), 0.015)
         if above.any():
-            cand = idx[above]
-            k = cand[np.argmin(P[cand, 2])]
-            if self._recedes_above(k):       # no dip: a forehead that slopes on back from the nose
-                k = cand[np.argmax(profile_concavity(P, cand, h=BRIDGE_BEND))]
-            L["nose_bridge"] = P[k]
+            L["nose_bridge"] = P[idx[above][np.argmin(P[above, 2])]]
         else:
             self.fallback("nose_bridge", self.reanchor("nose_bridge", "nose_tip", "nose_tip"),
                           "no nose bridge above the nose tip on the profile")
-
-    def _recedes_above(self, k, reach=0.01, depth=0.0005):
-        """Whether the profile above point k goes on back from it: within ``reach`` (m) above
-        it, a point more than ``depth`` (m) behind it. The deepest point of a search window
-        is then only the window's edge, not a dip."""
-        P = self.P
-        above = (self.idx > k) & (P[:, 1] < P[k, 1] + reach)
-        return bool(above.any() and P[above, 2].min() < P[k, 2] - depth)
 
     def chin(self):
         """The chin (``_chin``) and its profile index. A chin found on the scan's open edge
