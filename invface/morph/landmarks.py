@@ -350,7 +350,8 @@ class _ProfileSearch:
         except MeshError as e:
             return self.fallback("chin", carried, str(e))
         ends = self.P[:, 1].min() > self.P[chin, 1] - 0.5 * NECK_DROP       # no profile below it
-        if ends and self.gap["chin"] > PRIOR_GAP and _edge_distance(self.V, self.F, self.P[chin][None])[0] < EDGE_DISTANCE:
+        on_edge = _edge_distance(self.V, self.F, self.P[chin][None])[0] < EDGE_DISTANCE
+        if ends and on_edge and self.gap["chin"] > PRIOR_GAP:
             self.off.append("chin")
             self._off_the_scan("chin", carried)
         else:
