@@ -117,3 +117,40 @@ def test_bad_input_is_one_clear_line(case, tmp_path, monkeypatch, capsys):
     assert err and named in err[-1], (case, err)
     assert not any("Traceback" in line for line in err), case
     assert _folder_hash(tmp_path / "out") == before, case
+
+
+def test_sidecar_fields_name_the_file_and_the_field(tmp_path):
+    """io.schema.Fields, the one checker of every sidecar's fields: each bad field is one
+    InvfaceError that names the file and the field; the calibration's metadata that is not
+    JSON (a JSONDecodeError before) and a camera's fractional width are two of its readers'."""
+    from invface.errors import BundleError, CameraError, InvfaceError
+    from invface.fit.calibrate import Calibration
+    from invface.io.arrays import savez
+    from invface.io.schema import Fields
+    from invface.render.camera import Camera
+    f = Fields({"K": [[1, 0], [0, 1]], "n": "3", "w": 2.5, "s": 4, "o": [1], "j": "{bad", "none": None},
+               "cam.json", listing="fields: K, n")
+    for call, words in ((lambda: f.array("K", (3, 3)), "cam.json: field 'K' has shape (2, 2), expected (3, 3)"),
+                        (lambda: f.array("missing"), "cam.json: missing field 'missing' (fields: K, n)"),
+                        (lambda: f.array("none"), "cam.json: missing field 'none'"),
+                        (lambda: f.number("n"), "cam.json: field 'n' is \"3\", not a finite number"),
+                        (lambda: f.number("w", integer=True), "cam.json: field 'w' is 2.5, not a whole number"),
+                        (lambda: f.number("s", high=3), "cam.json: field 's' is 4, outside [-inf, 3]"),
+                        (lambda: f.text("s"), "cam.json: field 's' is int, not a string"),
+                        (lambda: f.mapping("o"), "cam.json: field 'o' is list, not a JSON object"),
+                        (lambda: f.json("j"), "cam.json: field 'j' is not valid JSON")):
+        with pytest.raises(InvfaceError) as e:
+            call()
+        assert str(e.value).startswith(words), (words, str(e.value))
+    assert f.array("absent", default=None) is None and f.number("s") == 4.0
+    with pytest.raises(InvfaceError, match="x.json: must hold a JSON object"):
+        Fields([1, 2], "x.json")
+    calib = tmp_path / "calib.npz"
+    savez(calib, dict(gamma=np.zeros((9, 3)), albedo=np.full((5, 3), 0.5), rotation=np.zeros(3),
+                      translation=np.zeros(3), meta=np.array("not json")))
+    with pytest.raises(BundleError, match="calib.npz: field 'meta' is not valid JSON"):
+        Calibration.load(calib)
+    cam = Camera.front_view(64, 48).to_dict()
+    with pytest.raises(CameraError, match="cam.json: field 'width' is 64.5, not a whole number"):
+        Camera.from_dict(dict(cam, width=64.5), source="cam.json")
+    assert Camera.from_dict(cam).size == (64, 48)

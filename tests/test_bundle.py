@@ -104,6 +104,9 @@ def test_corrupted_member_raises(saved, tmp_path):
     ("muscle_fibers", "scale", "'muscle_fibers' must be unit"),
     ("tets", "flip", "inverted"),
     ("header", np.array("{not json"), "'header' is not valid JSON"),
+    ("header", np.array("[1, 2]"), "'header' is not a JSON object"),
+    ("header", "version 2.5", "header: field 'version' is 2.5, not a whole number"),
+    ("header", "a muscle with no name", "header muscle 0: missing field 'name'"),
 ])
 def test_bad_fields_name_the_field(saved, tmp_path, field, value, message):
     with np.load(saved, allow_pickle=False) as d:
@@ -112,6 +115,13 @@ def test_bad_fields_name_the_field(saved, tmp_path, field, value, message):
         value = orig * 2.0
     elif isinstance(value, str) and value == "flip":
         value = orig[:, [0, 2, 1, 3]]
+    elif isinstance(value, str) and field == "header":
+        header = json.loads(str(orig))
+        if value == "version 2.5":
+            header["version"] = 2.5
+        else:
+            del header["muscles"][0]["name"]
+        value = np.array(json.dumps(header))
     bad = tmp_path / "bad.npz"
     _rewrite(saved, bad, **{field: value})
     with pytest.raises(BundleError, match=message):

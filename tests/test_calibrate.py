@@ -87,7 +87,7 @@ def test_calibration_file_round_trip_and_errors(tmp_path, scene):
     np.testing.assert_array_equal(back.gamma, cal.gamma)
     np.testing.assert_array_equal(back.albedo, cal.albedo)
     assert back.camera.size == (360, 270) and back.history == cal.history
-    with pytest.raises(BundleError, match="c.npz: albedo has .* vertices but the model has"):
+    with pytest.raises(BundleError, match="c.npz: field 'albedo' has .* vertices but the model has"):
         Calibration.load(tmp_path / "c.npz", vertex_count=V + 1)
     with pytest.raises(BundleError, match="not found"):
         Calibration.load(tmp_path / "missing.npz")

@@ -50,6 +50,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import BundleError, ConfigError, ImageError
+from ..io.schema import Fields
 from ..mesh.triangles import unique_edges
 from ..model.rig import euler_xyz
 from ..render import shading
@@ -93,28 +94,21 @@ class Calibration:
     @classmethod
     def load(cls, path, vertex_count=None):
         """Read a calibration file; errors name the file and the bad field."""
-        path = Path(path)
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except FileNotFoundError:
-            raise BundleError(f"{path}: calibration file not found") from None
-        except Exception as e:  # noqa: BLE001 - zip/npz errors vary
-            raise BundleError(f"{path}: not a readable calibration file ({e})") from None
-        for k, shape in (("gamma", (9, 3)), ("rotation", (3,)), ("translation", (3,))):
-            if k not in data or data[k].shape != shape or not np.all(np.isfinite(data[k])):
-                raise BundleError(f"{path}: field '{k}' is missing, not {shape} or not finite")
-        alb = data.get("albedo")
-        if alb is None or alb.ndim != 2 or alb.shape[1] != 3 or not np.all(np.isfinite(alb)):
-            raise BundleError(f"{path}: field 'albedo' is missing, not (V,3) or not finite")
+        from ..io.arrays import load_npz
+        f = Fields(load_npz(path, BundleError, "calibration file"), path, BundleError)
+        gamma, rotation, translation = (f.array(k, shape) for k, shape in
+                                        (("gamma", (9, 3)), ("rotation", (3,)), ("translation", (3,))))
+        alb = f.array("albedo", (None, 3))
         if vertex_count is not None and len(alb) != vertex_count:
-            raise BundleError(f"{path}: albedo has {len(alb)} vertices but the model has "
-                              f"{vertex_count}; calibrate with this model")
-        meta = json.loads(str(data["meta"])) if "meta" in data else {}
-        cam = Camera.from_dict(meta["camera"], source=str(path)) if meta.get("camera") else None
-        return cls(gamma=data["gamma"], albedo=alb, rotation=data["rotation"],
-                   translation=data["translation"], camera=cam, lam=meta.get("lam", EQ14_LAMBDA),
-                   history=meta.get("history", []), plate=meta.get("plate", ""))
+            f.fail("albedo", f"has {len(alb)} vertices but the model has {vertex_count}; calibrate with this model")
+        meta = f.json("meta", default=Fields({}, path, BundleError))
+        if not isinstance(meta, Fields):
+            f.fail("meta", "is not a JSON object")
+        cam = meta.mapping("camera", default=None)
+        return cls(gamma=gamma, albedo=alb, rotation=rotation, translation=translation,
+                   camera=None if cam is None else Camera.from_dict(cam.data, source=str(path)),
+                   lam=meta.number("lam", default=EQ14_LAMBDA, low=0),
+                   history=meta.listing_of("history", default=[]), plate=meta.text("plate", default=""))
 
 
 def mesh_laplacian(triangles, vertex_count):

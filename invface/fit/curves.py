@@ -20,13 +20,13 @@ pixel)::
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import InvfaceError
 from ..io.jsonfile import read_object
+from ..io.schema import Fields
 from ..mesh.sections import resample_even as resample
 from ..model.controls import FitVector
 from .dogleg import dogleg, with_linear_term
@@ -82,30 +82,26 @@ def curve_points(model, name, x):
 
 def read_curves(path, model, image_size=None):
     """{name: (n, 2) float px} from a plate curve file; names must be model curves."""
-    data = read_object(path, what="curve file")
-    curves = data.get("curves")
-    if not isinstance(curves, dict) or not curves:
-        raise InvfaceError(f"{path}: expected {{\"curves\": {{name: [[u, v], ...]}}}}")
-    unknown = sorted(set(curves) - set(model.curves) - set(IRIS_CURVES))
+    f = Fields(read_object(path, what="curve file"), path, listing='{"curves": {name: [[u, v], ...]}, "image_size": '
+               '[width, height]}')
+    curves = f.mapping("curves")
+    if not curves.data:
+        f.fail("curves", "is empty")
+    unknown = sorted(set(curves.data) - set(model.curves) - set(IRIS_CURVES))
     if unknown:
         raise InvfaceError(f"{path}: unknown curve name(s) {unknown}; the model's curves are "
                            f"{sorted(model.curves)}")
-    size = data.get("image_size")
-    if size is not None and not (isinstance(size, list) and len(size) == 2
-                                 and all(isinstance(v, int) and v > 0 for v in size)):
-        raise InvfaceError(f"{path}: \"image_size\" is {json.dumps(size)}, not [width, height] in pixels: "
-                           "fix it or leave it out")
-    if image_size is not None and size is not None and list(size) != list(image_size):
-        raise InvfaceError(f"{path}: curves were drawn on a {data['image_size']} image, the plate is "
+    size = f.array("image_size", (2,), default=None)
+    if size is not None and (np.any(size <= 0) or np.any(size != np.round(size))):
+        f.fail("image_size", f"is {size.tolist()}, not [width, height] in whole pixels: fix it or leave it out")
+    if image_size is not None and size is not None and size.astype(int).tolist() != list(image_size):
+        raise InvfaceError(f"{path}: curves were drawn on a {size.astype(int).tolist()} image, the plate is "
                            f"{list(image_size)}")
     out = {}
-    for name, pts in curves.items():
-        try:
-            a = np.asarray(pts, float)
-        except (TypeError, ValueError):
-            raise InvfaceError(f"{path}: curve '{name}' is not a list of [u, v] points") from None
-        if a.ndim != 2 or a.shape[1] != 2 or len(a) < 2 or not np.all(np.isfinite(a)):
-            raise InvfaceError(f"{path}: curve '{name}' needs at least 2 finite [u, v] points")
+    for name in curves.data:
+        a = curves.array(name, (None, 2))
+        if len(a) < 2:
+            curves.fail(name, "needs at least 2 [u, v] points")
         out[name] = a
     return out
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import BundleError, InvfaceError
 from ..io.arrays import savez
+from ..io.schema import Fields
 from ..mesh.embedding import skin_embedding_method
 from ..mesh.tets import signed_volumes
 from .muscle import Muscle
@@ -125,6 +126,26 @@ class _Reader:
         return a
 
 
+def _read_header(path, raw):
+    """The bundle's JSON header (a dict), checked: the format, a version this invface reads,
+    the name lists, and a name for every muscle."""
+    h = Fields({"header": raw}, path, BundleError).json("header")
+    if not isinstance(h, Fields):
+        raise BundleError(f"{path}: field 'header' is not a JSON object")
+    h.source = f"{path}: header"
+    fmt = h.data.get("format")
+    if fmt != FORMAT:
+        h.fail("format", f"is {fmt!r}, expected {FORMAT!r}")
+    version = h.number("version", default=-1, integer=True)
+    if version > VERSION:
+        h.fail("version", f"is {version}, newer than this invface ({VERSION}); upgrade invface")
+    for key in ("blendshape_names", "landmark_names", "curve_names", "muscles"):
+        h.listing_of(key)
+    for i, muscle in enumerate(h.data["muscles"]):
+        Fields(muscle, f"{path}: header muscle {i}", BundleError).text("name")
+    return h.data
+
+
 def read_bundle(path):
     """Read and validate a bundle: the FaceModel's fields as a dict (``FaceModel(**fields)``);
     every problem raises BundleError naming path and field."""
@@ -139,18 +160,7 @@ def read_bundle(path):
                           "the file is truncated or corrupted, rebuild it") from e
     with data:
         r = _Reader(path, data)
-        raw = r.get("header", None, ())
-        try:
-            header = json.loads(str(raw))
-        except json.JSONDecodeError as e:
-            r.fail("header", f"is not valid JSON ({e})")
-        if header.get("format") != FORMAT:
-            r.fail("header", f"has format {header.get('format')!r}, expected {FORMAT!r}")
-        if int(header.get("version", -1)) > VERSION:
-            r.fail("header", f"is version {header.get('version')}, newer than this invface ({VERSION}); upgrade invface")
-        for key in ("blendshape_names", "landmark_names", "curve_names", "muscles"):
-            if not isinstance(header.get(key), list):
-                r.fail("header", f"lacks the list '{key}'")
+        header = _read_header(path, r.get("header", None, ()))
 
         neutral = r.get("neutral", "f", (None, 3))
         V = len(neutral)

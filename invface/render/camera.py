@@ -68,43 +68,28 @@ class Camera:
 
     @classmethod
     def from_dict(cls, data, source="camera"):
-        def get(name, shape=None, required=True, default=None):
-            if name not in data:
-                if required:
-                    raise CameraError(f"{source}: missing field '{name}' (fields: width, height, "
-                                      "K, optional dist, R or rvec, t)")
-                return default
-            try:
-                a = np.asarray(data[name], float)
-            except (TypeError, ValueError):
-                raise CameraError(f"{source}: field '{name}' is not numeric") from None
-            if shape is not None and a.shape != shape:
-                raise CameraError(f"{source}: field '{name}' has shape {a.shape}, expected {shape}")
-            if not np.all(np.isfinite(a)):
-                raise CameraError(f"{source}: field '{name}' has non-finite values")
-            return a
-
-        w, h = get("width", ()), get("height", ())
-        if w <= 0 or h <= 0 or w != int(w) or h != int(h):
-            raise CameraError(f"{source}: width/height must be positive integers, got {w} x {h}")
-        K = get("K", (3, 3))
+        """A Camera from its JSON fields (``to_dict``); a missing or malformed field raises
+        CameraError naming ``source`` and the field."""
+        from ..io.schema import Fields
+        f = Fields(data, source, CameraError, "fields: width, height, K, optional dist, R or rvec, t")
+        w, h = (f.number(k, integer=True, low=1) for k in ("width", "height"))
+        K = f.array("K", (3, 3))
         if K[0, 0] <= 0 or K[1, 1] <= 0 or abs(K[2, 2] - 1) > 1e-9:
-            raise CameraError(f"{source}: K must have positive focal lengths and K[2][2] = 1")
-        dist = get("dist", required=False, default=np.zeros(5)).ravel()
+            f.fail("K", "must have positive focal lengths and K[2][2] = 1")
+        dist = f.array("dist", default=np.zeros(5)).ravel()
         if dist.size not in (4, 5, 8, 12, 14):
-            raise CameraError(f"{source}: 'dist' needs 4, 5, 8, 12 or 14 OpenCV coefficients, "
-                              f"got {dist.size}")
-        cam = cls.front_view(int(w), int(h))
+            f.fail("dist", f"needs 4, 5, 8, 12 or 14 OpenCV coefficients, got {dist.size}")
+        cam = cls.front_view(w, h)
         cam.K, cam.dist = K, dist
-        if "R" in data or "rvec" in data or "t" in data:
-            if "R" in data:
-                R = get("R", (3, 3))
+        if "R" in f or "rvec" in f or "t" in f:
+            if "R" in f:
+                R = f.array("R", (3, 3))
             else:
                 import cv2
-                R = cv2.Rodrigues(get("rvec").reshape(3, 1))[0]
+                R = cv2.Rodrigues(f.array("rvec", (3,)).reshape(3, 1))[0]
             if abs(np.linalg.det(R) - 1) > 1e-4 or np.abs(R @ R.T - np.eye(3)).max() > 1e-4:
-                raise CameraError(f"{source}: 'R' is not a rotation matrix")
-            cam.R, cam.t = R, get("t", (3,))
+                f.fail("R", "is not a rotation matrix")
+            cam.R, cam.t = R, f.array("t", (3,))
         return cam
 
     def to_dict(self):
