@@ -122,7 +122,8 @@ def test_bad_input_is_one_clear_line(case, tmp_path, monkeypatch, capsys):
 def test_sidecar_fields_name_the_file_and_the_field(tmp_path):
     """io.schema.Fields, the one checker of every sidecar's fields: each bad field is one
     InvfaceError that names the file and the field; the calibration's metadata that is not
-    JSON (a JSONDecodeError before) and a camera's fractional width are two of its readers'."""
+    JSON (a JSONDecodeError before), a ground-truth weight that is not a number (a ValueError
+    before) and a camera's fractional width are three of its readers'."""
     from invface.errors import BundleError, CameraError, InvfaceError
     from invface.fit.calibrate import Calibration
     from invface.io.arrays import savez
@@ -150,6 +151,12 @@ def test_sidecar_fields_name_the_file_and_the_field(tmp_path):
                       translation=np.zeros(3), meta=np.array("not json")))
     with pytest.raises(BundleError, match="calib.npz: field 'meta' is not valid JSON"):
         Calibration.load(calib)
+    from invface.fit.plate import read_truth
+    truth = tmp_path / "plate.truth.json"
+    truth.write_text(json.dumps({"kind": "simulation", "weights": {"mouthSmileLeft": "a"}, "rotation": [0, 0, 0],
+                                 "translation": [0, 0, 0.5]}))
+    with pytest.raises(InvfaceError, match="plate.truth.json: weights: field 'mouthSmileLeft' is \"a\""):
+        read_truth(truth, None)
     cam = Camera.front_view(64, 48).to_dict()
     with pytest.raises(CameraError, match="cam.json: field 'width' is 64.5, not a whole number"):
         Camera.from_dict(dict(cam, width=64.5), source="cam.json")

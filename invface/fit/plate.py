@@ -235,14 +235,15 @@ def read_truth(path, model):
     ``fit.samples.write_sample_plates``): the posed surface (V, 3) made by the model kind
     it names, and the dict."""
     from ..io.jsonfile import read_object
+    from ..io.schema import Fields
     t = read_object(path, what="ground-truth file")
+    f = Fields(t, path, listing="fields: kind, weights, jaw, rotation, translation")
+    kind = f.text("kind", choices=("blendshape", "simulation"))
+    w = f.mapping("weights")
+    controls = {"weights": {k: w.number(k) for k in w.data}, "jaw": f.array("jaw", (6,), default=np.zeros(6)),
+                "rotation": f.array("rotation", (3,)), "translation": f.array("translation", (3,))}
     vec = FitVector.of(model)
-    try:
-        z = vec.from_dict({"weights": t["weights"], "jaw": t.get("jaw", np.zeros(6)),
-                           "rotation": t["rotation"], "translation": t["translation"]}, what=str(path))
-        kind = t["kind"]
-    except (KeyError, ValueError, TypeError) as e:
-        raise InvfaceError(f"{path}: bad ground-truth file ({e})") from None
+    z = vec.from_dict(controls, what=str(path))
     return posed_surface(model.surface_model(kind), z, vec)[1], t
 
 
