@@ -1,8 +1,9 @@
 """Checked fields of a sidecar: a JSON object, or an NPZ archive's arrays read into a dict.
 
-Every reader of a user's or a run's file (cameras, calibrations, curve files, bundle
-headers) takes its fields through ``Fields``, so a bad field is one line that names the
-file, the field and what it should be, instead of a KeyError or a TypeError deep in the code.
+The readers of a user's or a run's files (cameras, calibrations, curve files, ground-truth
+files, bundle headers) take their fields through ``Fields``, so a bad field is one line that
+names the file, the field and what it should be, instead of a KeyError or a TypeError deep in
+the code.
 """
 from __future__ import annotations
 
