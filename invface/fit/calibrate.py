@@ -102,8 +102,6 @@ class Calibration:
         if vertex_count is not None and len(alb) != vertex_count:
             f.fail("albedo", f"has {len(alb)} vertices but the model has {vertex_count}; calibrate with this model")
         meta = f.json("meta", default=Fields({}, path, BundleError))
-        if not isinstance(meta, Fields):
-            f.fail("meta", "is not a JSON object")
         cam = meta.mapping("camera", default=None)
         return cls(gamma=gamma, albedo=alb, rotation=rotation, translation=translation,
                    camera=None if cam is None else Camera.from_dict(cam.data, source=str(path)),

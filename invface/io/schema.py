@@ -33,21 +33,32 @@ class Fields:
         """Raise the error: '<source>: field '<name>' <message>'."""
         raise self.error(f"{self.source}: field '{name}' {message}")
 
-    def _missing(self, name, default):
-        """``default`` for a field the file lacks (or holds as JSON null), or the error when
-        it is required."""
+    def _present(self, name, default):
+        """(True, the field's value), or (False, ``default``) for a field the file lacks or
+        holds as JSON null; a required field raises."""
+        raw = self.data.get(name)
+        if raw is not None:
+            return True, raw
         if default is _MISSING:
             more = f" ({self.listing})" if self.listing else ""
             raise self.error(f"{self.source}: missing field '{name}'{more}")
-        return default
+        return False, default
+
+    def _typed(self, name, default, kind, noun):
+        """``_present``, with a present field's value required to be a ``kind`` (``noun``
+        names it in the message)."""
+        found, raw = self._present(name, default)
+        if found and not isinstance(raw, kind):
+            self.fail(name, f"is {type(raw).__name__}, not {noun}")
+        return found, raw
 
     def array(self, name, shape=None, default=_MISSING, finite=True):
         """Field ``name`` as a float array; ``shape``: a tuple whose None entries match any
         size; ``finite``: refuse NaN and infinity. A missing field is ``default`` (returned
         as given) or an error."""
-        if self.data.get(name) is None:
-            return self._missing(name, default)
-        raw = self.data[name]
+        found, raw = self._present(name, default)
+        if not found:
+            return raw
         try:
             a = np.asarray(raw, float)
         except (TypeError, ValueError):
@@ -61,9 +72,9 @@ class Fields:
 
     def number(self, name, default=_MISSING, low=None, high=None, integer=False):
         """Field ``name`` as a float (an int with ``integer``), within [low, high] where given."""
-        if self.data.get(name) is None:
-            return self._missing(name, default)
-        raw = self.data[name]
+        found, raw = self._present(name, default)
+        if not found:
+            return raw
         if isinstance(raw, bool) or not isinstance(raw, (int, float, np.integer, np.floating)) \
                 or not np.isfinite(raw):
             self.fail(name, f"is {json.dumps(raw) if _jsonable(raw) else type(raw).__name__}, not a finite number")
@@ -76,44 +87,33 @@ class Fields:
 
     def text(self, name, default=_MISSING, choices=None):
         """Field ``name`` as a string, one of ``choices`` where given."""
-        if self.data.get(name) is None:
-            return self._missing(name, default)
-        raw = self.data[name]
-        if not isinstance(raw, str):
-            self.fail(name, f"is {type(raw).__name__}, not a string")
-        if choices is not None and raw not in choices:
+        found, raw = self._typed(name, default, str, "a string")
+        if found and choices is not None and raw not in choices:
             self.fail(name, f"is '{raw}', not one of {', '.join(map(str, choices))}")
         return raw
 
     def mapping(self, name, default=_MISSING):
         """Field ``name`` as its own Fields (a JSON object inside this one)."""
-        if self.data.get(name) is None:
-            return self._missing(name, default)
-        raw = self.data[name]
-        if not isinstance(raw, dict):
-            self.fail(name, f"is {type(raw).__name__}, not a JSON object")
-        return Fields(raw, f"{self.source}: {name}", self.error)
+        found, raw = self._typed(name, default, dict, "a JSON object")
+        return Fields(raw, f"{self.source}: {name}", self.error) if found else raw
 
     def listing_of(self, name, default=_MISSING):
         """Field ``name`` as a list."""
-        if self.data.get(name) is None:
-            return self._missing(name, default)
-        raw = self.data[name]
-        if not isinstance(raw, list):
-            self.fail(name, f"is {type(raw).__name__}, not a list")
-        return raw
+        return self._typed(name, default, list, "a list")[1]
 
     def json(self, name, default=_MISSING):
-        """Field ``name`` (a string, or an NPZ's 0-d string array) parsed as JSON, as Fields
-        when it is an object."""
-        if self.data.get(name) is None:
-            return self._missing(name, default)
-        raw = self.data[name]
+        """Field ``name`` (a string, or an NPZ's 0-d string array) parsed as a JSON object,
+        as its own Fields."""
+        found, raw = self._present(name, default)
+        if not found:
+            return raw
         try:
             value = json.loads(str(raw))
         except ValueError as e:
             self.fail(name, f"is not valid JSON ({e})")
-        return Fields(value, f"{self.source}: {name}", self.error) if isinstance(value, dict) else value
+        if not isinstance(value, dict):
+            self.fail(name, "is not a JSON object")
+        return Fields(value, f"{self.source}: {name}", self.error)
 
 
 def _jsonable(v):

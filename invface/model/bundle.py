@@ -130,9 +130,6 @@ def _read_header(path, raw):
     """The bundle's JSON header (a dict), checked: the format, a version this invface reads,
     the name lists, and a name for every muscle."""
     h = Fields({"header": raw}, path, BundleError).json("header")
-    if not isinstance(h, Fields):
-        raise BundleError(f"{path}: field 'header' is not a JSON object")
-    h.source = f"{path}: header"
     fmt = h.data.get("format")
     if fmt != FORMAT:
         h.fail("format", f"is {fmt!r}, expected {FORMAT!r}")

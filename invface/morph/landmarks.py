@@ -272,12 +272,12 @@ def find_landmarks(V, F, model):
     search.mouth(chin)
     search.neck_and_top(chin)
     search.head_sides()
-    off = search.off + _off_scan(V, F, L, gap)
+    outer = _off_scan(V, F, L, gap)
     if L["neck_start"][1] > L["chin"][1] - 0.5 * NECK_DROP:           # the profile ends above it
-        off.append("neck_start")
-    for k in off:
-        L[k] = L[k] if k == "chin" else carried[k]
-    return {k: np.asarray(L[k], float) for k in LANDMARKS}, tuple(off), dict(fell)
+        outer.append("neck_start")
+    for k in outer:
+        L[k] = carried[k]
+    return {k: np.asarray(L[k], float) for k in LANDMARKS}, tuple(search.off + outer), dict(fell)
 
 
 class _ProfileSearch:
