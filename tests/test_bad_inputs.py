@@ -77,6 +77,16 @@ CASES = {
     "export of a folder with no fit": ({}, ["export", "out"], "out"),
     "export in an unknown format": ({"out/blendshape/fit.json": lambda p: p.write_text("{}")},
                                     ["export", "out", "--format", "fbx"], "fbx"),
+    # a run's records, edited by hand or by another tool
+    "report of a fit.json whose weights are a list": (
+        {"out/blendshape/fit.json": lambda p: p.write_text('{"kind": "blendshape", "weights": [0.5]}')},
+        ["report", "out"], "fit.json: field 'weights' is list, not a JSON object of numbers"),
+    "export of a fit.json with an ARKit value in words": (
+        {"out/blendshape/fit.json": lambda p: p.write_text('{"arkit": {"jawOpen": "wide"}}')},
+        ["export", "out", "--format", "csv"], "arkit: field 'jawOpen' is \"wide\""),
+    "export of a run.json whose frames are a number": (
+        {"out/run.json": lambda p: p.write_text('{"frames": 3}')}, ["export", "out"],
+        "run.json: field 'frames' is int, not a list of strings"),
     # plates as VFX delivers them
     "a sequence pattern that matches no file": ({}, ["fit-plate", "shot.####.exr", "-o", "out"], "shot.####.exr"),
     "a DPX that is not one": ({"p.dpx": lambda p: p.write_bytes(b"not a dpx file")}, ["fit-plate", "p.dpx", "-o", "out"],

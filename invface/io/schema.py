@@ -1,7 +1,7 @@
 """Checked fields of a sidecar: a JSON object, or an NPZ archive's arrays read into a dict.
 
 The readers of a user's or a run's files (cameras, calibrations, curve files, ground-truth
-files, bundle headers) take their fields through ``Fields``, so a bad field is one line that
+files, bundle headers, a run's fit.json and run.json) take their fields through ``Fields``, so a bad field is one line that
 names the file, the field and what it should be, instead of a KeyError or a TypeError deep in
 the code.
 """
@@ -28,6 +28,12 @@ class Fields:
 
     def __contains__(self, name):
         return name in self.data
+
+    def require(self, *names):
+        """Raise the missing-field error for the first of ``names`` the file lacks or holds as
+        null."""
+        for name in names:
+            self._present(name, _MISSING)
 
     def fail(self, name, message):
         """Raise the error: '<source>: field '<name>' <message>'."""
@@ -100,6 +106,28 @@ class Fields:
     def listing_of(self, name, default=_MISSING):
         """Field ``name`` as a list."""
         return self._typed(name, default, list, "a list")[1]
+
+    def boolean(self, name, default=_MISSING):
+        """Field ``name`` as true or false."""
+        return self._typed(name, default, bool, "true or false")[1]
+
+    def strings(self, name, default=_MISSING):
+        """Field ``name`` as a list of strings."""
+        found, raw = self._typed(name, default, list, "a list of strings")
+        if found and not all(isinstance(v, str) for v in raw):
+            self.fail(name, "holds an entry that is not a string")
+        return raw
+
+    def numbers(self, name, default=_MISSING):
+        """Field ``name`` as {key: float}: a JSON object whose values are all finite numbers."""
+        found, raw = self._typed(name, default, dict, "a JSON object of numbers")
+        if not found:
+            return raw
+        inner = Fields(raw, f"{self.source}: {name}", self.error)
+        for k, v in raw.items():
+            if v is None:
+                inner.fail(k, "is null, not a finite number")
+        return {k: inner.number(k) for k in raw}
 
     def json(self, name, default=_MISSING):
         """Field ``name`` (a string, or an NPZ's 0-d string array) parsed as a JSON object,

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.fitrecords import read_fit_json
 from ..io.images import linear_to_srgb
 from ..io.jsonfile import write_object
 from ..io.tables import write_csv
@@ -20,10 +21,7 @@ def sequence_records(out, kinds):
     for kind in kinds:
         found = []
         for f in sorted(Path(out).glob(f"*/{kind}/fit.json")):
-            try:
-                found.append(dict(json.loads(f.read_text()), _name=f.parent.parent.name))
-            except ValueError:
-                continue
+            found.append(dict(read_fit_json(f), _name=f.parent.parent.name))
         recs[kind] = sorted(found, key=lambda r: (r.get("frame", 0), r["_name"]))
     return recs
 
@@ -125,7 +123,7 @@ def write_arkit_csv(out, kinds, fps=24.0, single=False):
     for kind in kinds:
         if single:
             f = Path(out) / kind / "fit.json"
-            recs = [json.loads(f.read_text())] if f.is_file() else []
+            recs = [read_fit_json(f)] if f.is_file() else []
         else:
             recs = sequence_records(out, [kind])[kind]
         if not recs:
@@ -154,7 +152,7 @@ def take_frames(run, kind, single, points=True):
     frame's camera and triangles. Returns (frames, triangles, camera dict) or None."""
     if single:
         f = Path(run) / kind / "fit.json"
-        recs = [dict(json.loads(f.read_text()), _dir=str(f.parent))] if f.is_file() else []
+        recs = [dict(read_fit_json(f), _dir=str(f.parent))] if f.is_file() else []
     else:
         recs = [dict(r, _dir=str(Path(run) / r["_name"] / kind)) for r in sequence_records(run, [kind])[kind]]
     frames, tri, cam = [], None, None

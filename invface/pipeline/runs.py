@@ -15,6 +15,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..errors import InvfaceError
+from ..io.fitrecords import read_fit_json, read_run_json
 from ..io.jsonfile import write_object
 
 RUN_FILE = "run.json"
@@ -37,11 +38,9 @@ def run_hash(model, calibration, options):
 
 
 def read_run(out):
-    """out/run.json as a dict ({} when absent or unreadable)."""
-    try:
-        return json.loads((Path(out) / RUN_FILE).read_text())
-    except (OSError, ValueError):
-        return {}
+    """out/run.json as a dict ({} when absent; ``io.fitrecords.read_run_json``: a file that is
+    not a run record is an InvfaceError naming it and the field)."""
+    return read_run_json(Path(out) / RUN_FILE)
 
 
 def start_run(out, frames, kinds, force=False, inputs=None, extra=None):
@@ -82,10 +81,11 @@ def frame_hash(digest, inputs):
 
 
 def fit_record(folder, kind):
-    """The kind's fit.json in a frame folder as a dict (None when absent or unreadable)."""
+    """The kind's fit.json in a frame folder as a dict (``io.fitrecords.read_fit_json``); None
+    when absent or not a fit record, so that the frame is fitted again."""
     try:
-        return json.loads((Path(folder) / kind / "fit.json").read_text())
-    except (OSError, ValueError):
+        return read_fit_json(Path(folder) / kind / "fit.json")
+    except InvfaceError:
         return None
 
 

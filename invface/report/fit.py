@@ -23,6 +23,7 @@ import numpy as np
 
 from ..errors import InvfaceError
 from ..io.atomic import write_text
+from ..io.fitrecords import read_fit_json
 from ..io.images import linear_to_srgb, save_figure, write_display_image
 
 
@@ -200,7 +201,7 @@ def _fit_images(folder, quick=False, heat_scale=None):
     render, wipe, error and curve pictures only (no 3D heat map or charts, 60 % of a curves-only
     frame's time in a sequence); heat_scale: the 3D heat map's top in mm (the page's shared one)."""
     folder = Path(folder)
-    summary = json.loads((folder / "fit.json").read_text())
+    summary = read_fit_json(folder / "fit.json", required=("kind", "weights"))
     pics = {}
     with np.load(folder / "fit.npz", allow_pickle=False) as z:
         data = {k: z[k] for k in z.files}
@@ -240,17 +241,22 @@ def _fit_images(folder, quick=False, heat_scale=None):
     return summary, pics
 
 
+def _has(summary, key):
+    """Whether fit.json holds a value (not null: a number that was not finite) for ``key``."""
+    return summary.get(key) is not None
+
+
 COMPARE = (("model", lambda s: s["kind"]),
            ("vertex error median / max (mm)", lambda s: (f"{s['truth']['median_mm']:.3f} / {s['truth']['max_mm']:.2f}"
                                                        if "truth" in s else "-")),
            ("median error in depth / in the image plane / shape only (mm)",
             lambda s: (f"{s['truth']['depth_median_mm']:.3f} / {s['truth']['in_plane_median_mm']:.3f} / "
                        f"{s['truth']['shape_median_mm']:.3f}" if "depth_median_mm" in s.get("truth", {}) else "-")),
-           ("lip volume change", lambda s: f"{100 * s['lip_volume_change']:+.2f} %" if "lip_volume_change" in s else "-"),
+           ("lip volume change", lambda s: f"{100 * s['lip_volume_change']:+.2f} %" if _has(s, "lip_volume_change") else "-"),
            ("non-zero weights", lambda s: s.get("nonzero_weights", "-")),
            ("active muscles", lambda s: s.get("active_muscles", "-") if s.get("activations") else "-"),
-           ("curve RMS (px)", lambda s: f"{s['curve_rms_px']:.2f}" if "curve_rms_px" in s else "-"),
-           ("image RMS (linear)", lambda s: f"{s['image_rms']:.4f}" if "image_rms" in s else "-"),
+           ("curve RMS (px)", lambda s: f"{s['curve_rms_px']:.2f}" if _has(s, "curve_rms_px") else "-"),
+           ("image RMS (linear)", lambda s: f"{s['image_rms']:.4f}" if _has(s, "image_rms") else "-"),
            ("image RMS in the mouth / its opening / the eyes",
             lambda s: " / ".join(f"{s['image_rms_by_region'][k]:.4f}" if k in s.get("image_rms_by_region", {}) else "-"
                                  for k in ("mouth", "opening", "eyes"))),

@@ -3,8 +3,9 @@ by ``pipeline.runs.start_run`` as a run starts): the reports name what a stopped
 out, and a new run finds an earlier one's results."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
+
+from ..io.fitrecords import read_run_json
 
 KINDS = ("blendshape", "simulation")
 
@@ -23,9 +24,8 @@ def run_notes(run, frame=None):
     the kinds of ``frame`` (a sequence frame's name; None for a single plate) or the frames
     of a sequence that have no fit, and whether the run was stopped before it finished."""
     run = Path(run)
-    try:
-        plan = json.loads((run / "run.json").read_text())
-    except (OSError, ValueError):
+    plan = read_run_json(run / "run.json")
+    if not plan:
         return []
     stopped = "" if plan.get("finished") else " (the run stopped before it finished)"
     said = [plan["identity"] + "."] if frame is None and plan.get("identity") else []

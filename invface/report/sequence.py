@@ -10,13 +10,13 @@ linked to its own page.
 from __future__ import annotations
 
 import html
-import json
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InvfaceError
 from ..io.atomic import write_text
+from ..io.fitrecords import read_fit_json
 from .fit import COMPARE, _figure, identity_section
 from .runs import run_notes
 
@@ -64,10 +64,7 @@ def write_sequence_report(run, title=None):
     summaries = {}
     for frame, fits in frames.items():
         for kind, folder in fits.items():
-            try:
-                summaries[frame, kind] = json.loads((folder / "fit.json").read_text())
-            except (OSError, ValueError) as e:
-                raise InvfaceError(f"{folder / 'fit.json'}: unreadable fit result ({e})") from None
+            summaries[frame, kind] = read_fit_json(folder / "fit.json")
     sections = []
     for kind in kinds:
         have = [f for f in names if (f, kind) in summaries]
