@@ -536,7 +536,8 @@ def COLORSPACE(text):
 
 
 def build_parser():
-    from .fit.lambdas import EQ13_LAMBDA, EQ16_TEMPORAL, TEMPORAL_LAMBDA
+    """The CLI's parser: one sub-command per verb (``_add_*``), each with its worked example
+    (``EXAMPLES``) under its help."""
     p = argparse.ArgumentParser(prog="invface", description="Anatomically based, differentiable face capture.")
     from . import __version__
     p.add_argument("--version", action="version", version=f"invface {__version__}")
@@ -545,6 +546,31 @@ def build_parser():
     # every verb's help states its defaults
     verb = functools.partial(argparse.ArgumentParser, formatter_class=_DefaultsHelp)
     sub = p.add_subparsers(dest="command", required=True, parser_class=verb)
+    _add_build_model(sub)
+    _add_simulate(sub)
+    _add_calibrate(sub)
+    _add_fit_scan(sub)
+    _add_fit_plate(sub)
+    _add_report_and_export(sub)
+    _add_camera(sub, verb)
+    _add_demo_and_samples(sub)
+    for words, example in EXAMPLES.items():
+        parser = sub.choices[words[0]]
+        for w in words[1:]:
+            parser = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[w]
+        parser.epilog = "example:\n" + "\n".join("  " + line for line in example)
+    return p
+
+
+def _model_options(parser):
+    """--model and --resolution: which FaceModel a verb uses."""
+    parser.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
+    parser.add_argument("--resolution", type=POSITIVE, default=1.0,
+                        help="template size factor when no --model (dimensionless; 1 = ~35k tets)")
+
+
+def _add_build_model(sub):
+    """The build-model verb."""
     b = sub.add_parser("build-model", help="build (or inspect) a FaceModel bundle")
     b.add_argument("input", nargs="?", help="an existing bundle to summarise/preview")
     b.add_argument("--template", action="store_true", help="the built-in template head (default)")
@@ -564,10 +590,13 @@ def build_parser():
     b.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     b.add_argument("--preview", metavar="DIR", help="write preview images into DIR")
     b.set_defaults(func=cmd_build_model)
+
+
+def _add_simulate(sub):
+    """The simulate verb."""
     s = sub.add_parser("simulate", help="pose the model by muscle activations or blendshape-driven tracks "
                                         "(quasistatic simulation)")
-    s.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
-    s.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model (dimensionless; 1 = ~35k tets)")
+    _model_options(s)
     s.add_argument("--activations", help='JSON file: {"activations": {"zygomaticus_major_L": 0.8, ...}, "jaw": [6]}')
     s.add_argument("--set", action="append", metavar="MUSCLE=A", help="set one activation (repeatable)")
     s.add_argument("--weight", action="append", metavar="SHAPE=W",
@@ -577,13 +606,16 @@ def build_parser():
     s.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     s.add_argument("--preview", help="write a PNG: neutral (top) and posed (bottom), front and 3/4")
     s.set_defaults(func=cmd_simulate)
+
+
+def _add_calibrate(sub):
+    """The calibrate verb (Eq. 14)."""
     c = sub.add_parser("calibrate", help="solve SH lighting and per-vertex albedo on a neutral plate (Eq. 14)")
     c.add_argument("plate", help="plate image (EXR, DPX, TIFF, PNG, JPEG, ...; see --colorspace)")
     c.add_argument("--colorspace", type=COLORSPACE, help=COLORSPACE_HELP)
     c.add_argument("--camera", help="JSON camera file (default: PLATE.json beside the plate, else the "
                                     "front view)")
-    c.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
-    c.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model (dimensionless; 1 = ~35k tets)")
+    _model_options(c)
     c.add_argument("--pose", type=FINITE, nargs=6, metavar=("RX", "RY", "RZ", "TX", "TY", "TZ"),
                    help="rigid head pose: Euler XYZ (rad) and translation (m); default identity")
     c.add_argument("--auto-pose", action="store_true",
@@ -601,11 +633,15 @@ def build_parser():
     c.add_argument("-o", "--output", default="calib.npz", help="calibration file to write (.npz)")
     c.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     c.set_defaults(func=cmd_calibrate)
+
+
+def _add_fit_scan(sub):
+    """The fit-scan verb (Eq. 13)."""
+    from .fit.lambdas import EQ13_LAMBDA
     fs = sub.add_parser("fit-scan", help="fit controls and rigid pose to a 3D scan (Eq. 13)")
     fs.add_argument("scan", help="scan mesh (OBJ/PLY, model frame: +Y up, face along +Z)")
     fs.add_argument("--unit", choices=["m", "cm", "mm"], help="the scan's unit (default: found from its size)")
-    fs.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
-    fs.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model (dimensionless; 1 = ~35k tets)")
+    _model_options(fs)
     fs.add_argument("--model-kind", choices=["blendshape", "simulation"], default="blendshape",
                     help="blendshape: the rig alone (paper 000 Eq. 1-2, fast); simulation: the muscle-driven flesh")
     fs.add_argument("--mode", choices=["correspondence", "nearest"], default="correspondence",
@@ -615,6 +651,11 @@ def build_parser():
     fs.add_argument("-o", "--output", default="reports/fit-scan", help="output folder")
     fs.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     fs.set_defaults(func=cmd_fit_scan)
+
+
+def _add_fit_plate(sub):
+    """The fit-plate verb (Eq. 15-16, a photo, a sequence or a clip)."""
+    from .fit.lambdas import EQ16_TEMPORAL, TEMPORAL_LAMBDA
     fp = sub.add_parser("fit-plate", help="fit controls and pose to a film plate: curves (Eq. 15), then "
                                           "shape from shading (Eq. 16); a folder is a sequence")
     fp.add_argument("plate", help="plate image (EXR, DPX, TIFF, PNG, JPEG, ...), a numbered sequence "
@@ -661,8 +702,7 @@ def build_parser():
                     help="which face the detector fits when the plate shows several (an index from 0): 0 the first found (the whole "
                          "frame first, then crops around face proposals, largest first), 1 the next, ...")
     fp.add_argument("--camera", help="JSON camera file (default: PLATE.json beside the plate, else the front view)")
-    fp.add_argument("--model", help="a FaceModel bundle (default: the built-in template)")
-    fp.add_argument("--resolution", type=POSITIVE, default=1.0, help="template size factor when no --model (dimensionless; 1 = ~35k tets)")
+    _model_options(fp)
     fp.add_argument("--model-kind", choices=["blendshape", "simulation", "both"], default="blendshape",
                     help="blendshape: the rig alone (paper 000 Eq. 1-2, fast); simulation: the muscle-driven flesh "
                     "(lips keep their volume, contacts hold); both: each, compared in the report")
@@ -686,6 +726,10 @@ def build_parser():
                          "inputs otherwise resumes it, skipping the frames already fitted)")
     fp.add_argument("-o", "--output", help="report folder (default reports/fit-plate/PLATE)")
     fp.set_defaults(func=cmd_fit_plate)
+
+
+def _add_report_and_export(sub):
+    """The report and export verbs, which read a run written earlier."""
     rp = sub.add_parser("report", help="(re)write the HTML report of a fit folder")
     rp.add_argument("run", help="folder with fit.json (or sub-folders with one each)")
     rp.set_defaults(func=cmd_report)
@@ -703,6 +747,10 @@ def build_parser():
     ex.add_argument("--fps", type=POSITIVE, help="the clip's frame rate (frames per second) for the timecodes "
                     "(default: the run's, else 24)")
     ex.set_defaults(func=cmd_export)
+
+
+def _add_camera(sub, verb):
+    """The camera verb and its calibrate tool."""
     cam = sub.add_parser("camera", help="camera tools")
     camsub = cam.add_subparsers(dest="camera_command", required=True, parser_class=verb)
     cc = camsub.add_parser("calibrate", help="intrinsics and distortion from checkerboard images (OpenCV)")
@@ -713,6 +761,10 @@ def build_parser():
     cc.add_argument("-o", "--output", default="camera.json", help="JSON camera file to write")
     cc.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     cc.set_defaults(func=cmd_camera_calibrate)
+
+
+def _add_demo_and_samples(sub):
+    """The demo and samples verbs."""
     d = sub.add_parser("demo", help="run the main job on the built-in model")
     d.add_argument("-o", "--out", "--output", dest="output", default="reports/demo", help="output folder")
     d.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
@@ -725,12 +777,6 @@ def build_parser():
     sa.add_argument("--frames", type=COUNT, default=24, help="the clip's length in frames (at 24 fps)")
     sa.add_argument("--overwrite", action="store_true", help="replace an existing output (refused otherwise)")
     sa.set_defaults(func=cmd_samples)
-    for words, example in EXAMPLES.items():
-        parser = sub.choices[words[0]]
-        for w in words[1:]:
-            parser = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[w]
-        parser.epilog = "example:\n" + "\n".join("  " + line for line in example)
-    return p
 
 
 # one worked example per verb, shown under its --help and in docs/cli.md

@@ -4,6 +4,8 @@
 - no import cycles between modules or between subpackages, counting imports made inside
   functions and the simulation model's registration string;
 - the import directions of ARCHITECTURE.md;
+- functions a reader can hold in their head: none over ``LONGEST`` lines but the one Mitsuba
+  integrator registration, whose class exists only once a variant is set;
 
 and the atomic writer's promise: a failed rename leaves no temporary file and no target.
 """
@@ -89,6 +91,35 @@ def test_every_file_write_goes_through_io():
         for line, call in file_writes(ast.parse(path.read_text())):
             bad.append(f"{path.relative_to(ROOT.parent)}:{line}: {call}")
     assert not bad, "file writes outside invface/io (use invface.io's writers):\n" + "\n".join(bad)
+
+
+LONGEST = 80           # lines of a function, docstring included
+LONG_ALLOWED = {"invface.render.integrator.register"}
+
+
+def long_functions(tree, mod):
+    """[(dotted name, lines)] of the functions (methods and nested ones included) longer than
+    LONGEST in a module's AST."""
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            lines = node.end_lineno - node.lineno + 1
+            if lines > LONGEST:
+                out.append((f"{mod}.{node.name}", lines))
+    return out
+
+
+def test_no_function_over_80_lines():
+    found = [f for mod, path in MODULES.items() for f in long_functions(ast.parse(path.read_text()), mod)]
+    bad = [f"{name}: {n} lines" for name, n in found if name not in LONG_ALLOWED]
+    assert not bad, f"functions over {LONGEST} lines (split them along their stages):\n" + "\n".join(bad)
+    assert len(found) <= 2
+
+
+def test_the_length_lint_counts_nested_functions():
+    src = "def outer():\n    def inner():\n" + "        x = 1\n" * 85 + "    return inner\n"
+    names = [n for n, _ in long_functions(ast.parse(src), "m")]
+    assert names == ["m.outer", "m.inner"]
 
 
 def test_the_write_lint_finds_writes():

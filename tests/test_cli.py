@@ -261,7 +261,7 @@ def test_fit_plate_writes_the_kinds_that_finish_and_exits_0(small_expressive_mod
 
 
 def test_report_names_a_truncated_fit_file_and_bad_numbers_are_refused(tmp_path, capsys):
-    (tmp_path / "fit.json").write_text('{"kind": "blendshape"}')
+    (tmp_path / "fit.json").write_text('{"kind": "blendshape", "weights": {}}')
     (tmp_path / "fit.npz").write_bytes(b"PK\x03\x04" + b"\x00" * 40)         # a zip cut short
     r = run("report", str(tmp_path))
     assert r.returncode == 2 and "Traceback" not in r.stderr

@@ -165,6 +165,47 @@ def _evaluate(fun, x):
     return NormalEquations.from_residuals(*out) if isinstance(out, tuple) else out
 
 
+def _bounds(n, lower, upper):
+    """(lo, hi) (n,) arrays of the box (None: unbounded); a crossed box is a ConfigError."""
+    lo = np.full(n, -np.inf) if lower is None else np.broadcast_to(np.asarray(lower, float), n)
+    hi = np.full(n, np.inf) if upper is None else np.broadcast_to(np.asarray(upper, float), n)
+    if np.any(lo > hi):
+        raise ConfigError("dogleg: a lower bound exceeds its upper bound")
+    return lo, hi
+
+
+def _trial(fun, x):
+    """(NormalEquations, cost) at a trial point; (None, inf) where the model cannot reach it
+    (a SimulationError), so the step is rejected and the radius shrinks."""
+    try:
+        ne = _evaluate(fun, x)
+    except SimulationError:
+        return None, np.inf
+    return ne, ne.cost
+
+
+def _curvature_scale(mu, g, p, pHp, actual):
+    """``dogleg``'s adapt_curvature rule: the next mu from the measured curvature along the
+    step ``p`` relative to H (pHp = p.H.p without mu), c = 2 (-g.p - actual) / pHp, as the
+    geometric mean of mu and c, in [max(0.05, mu / 2), 1]; mu unchanged where pHp <= 0."""
+    if pHp <= 0:
+        return mu
+    c = 2 * (-(g @ p) - actual) / pHp
+    # c <= 0: the cost fell at least as fast as its slope said, the model's curvature is too
+    # high along p by more than any c > 0 would say: mu falls by the most allowed
+    return float(np.clip(np.sqrt(mu * c) if c > 0 else 0.0, max(0.05, 0.5 * mu), 1.0))
+
+
+def _new_radius(radius, rho, step):
+    """The trust radius after a step of length ``step`` whose actual / predicted decrease is
+    ``rho``: a quarter of the step below 0.25, doubled above 0.75 at the boundary."""
+    if rho < 0.25:
+        return 0.25 * step
+    if rho > 0.75 and step >= 0.9 * radius:
+        return 2 * radius
+    return radius
+
+
 def dogleg(fun, x0, lower=None, upper=None, max_iter=50, radius=1.0, ftol=1e-10, xtol=1e-8,
            gtol=1e-12, min_radius=0.0, adapt_curvature=False, progress=None):
     """Minimise 0.5 |r(x)|^2 with ``fun(x) -> (r, J)`` or ``-> NormalEquations``,
@@ -188,11 +229,7 @@ def dogleg(fun, x0, lower=None, upper=None, max_iter=50, radius=1.0, ftol=1e-10,
     trust radius below ``min_radius``, or after ``max_iter`` iterations. ``progress(entry)``
     is called with each log entry."""
     x = np.asarray(x0, float).copy()
-    n = len(x)
-    lo = np.full(n, -np.inf) if lower is None else np.broadcast_to(np.asarray(lower, float), n)
-    hi = np.full(n, np.inf) if upper is None else np.broadcast_to(np.asarray(upper, float), n)
-    if np.any(lo > hi):
-        raise ConfigError("dogleg: a lower bound exceeds its upper bound")
+    lo, hi = _bounds(len(x), lower, upper)
     x = np.clip(x, lo, hi)
     ne = _evaluate(fun, x)
     cost = ne.cost
@@ -211,23 +248,12 @@ def dogleg(fun, x0, lower=None, upper=None, max_iter=50, radius=1.0, ftol=1e-10,
         p = _box_dogleg_step(H, g, free, lo - x, hi - x, radius)
         predicted = -(g @ p + 0.5 * p @ H @ p)
         x_new = x + p
-        try:
-            ne_new = _evaluate(fun, x_new)
-            cost_new = ne_new.cost
-        except SimulationError:       # the model cannot reach this trial point: reject, shrink
-            cost_new = np.inf
+        ne_new, cost_new = _trial(fun, x_new)
         actual = cost - cost_new
         rho = actual / predicted if predicted > 0 and np.isfinite(cost_new) else -1.0
-        pHp = p @ H @ p / mu
-        if adapt_curvature and np.isfinite(cost_new) and pHp > 0:
-            c = 2 * (-(g @ p) - actual) / pHp
-            # c <= 0: the cost fell at least as fast as its slope said, the model's curvature
-            # is too high along p by more than any c > 0 would say: mu falls by the most allowed
-            mu = float(np.clip(np.sqrt(mu * c) if c > 0 else 0.0, max(0.05, 0.5 * mu), 1.0))
-        if rho < 0.25:
-            radius = 0.25 * np.linalg.norm(p)
-        elif rho > 0.75 and np.linalg.norm(p) >= 0.9 * radius:
-            radius = 2 * radius
+        if adapt_curvature and np.isfinite(cost_new):
+            mu = _curvature_scale(mu, g, p, p @ H @ p / mu, actual)
+        radius = _new_radius(radius, rho, np.linalg.norm(p))
         accepted = rho > 1e-4
         entry = {"iteration": it, "cost": cost_new if accepted else cost, "rho": float(rho), "mu": mu,
                  "radius": float(radius), "step": float(np.linalg.norm(p)), "accepted": bool(accepted),

@@ -139,19 +139,7 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     history = [dict(h, stage="curves") for h in cf.history]
     seconds = {"curves": time.perf_counter() - t0}
     p, rot, tr, status = cf.p, cf.rotation, cf.translation, f"curves: {cf.status}"
-    # coarse to fine: the blendshape model first fits the pyramid's lower levels (the render
-    # at half resolution, a quarter of the pixels to differentiate), then the kind fits the
-    # whole pyramid. For the simulation the blendshape steps only have to bring the head
-    # near: at most 6, as a blendshape optimum is a poor start for it (the same weights
-    # mean other shapes; from there the open-mouth plate's simulation stage stalled at once)
-    n = max_iter_shading
-    final_ftol = 5e-3           # both kinds' last stage: a fair comparison, see the module doc
-    stages = [("shading-coarse", "blendshape", 2e-2, 1, n, COARSE_RADIUS),
-              ("shading", "blendshape", final_ftol, 0, n, 1.0)] \
-        if kind == "blendshape" else \
-        [("shading-coarse", "blendshape", 2e-2, 1, min(6, n), COARSE_RADIUS),
-         ("shading-simulation", "simulation", final_ftol, 0, n, SIMULATION_RADIUS)]
-    for stage, skind, ftol, level, iters, radius in stages if shading else []:
+    for stage, skind, ftol, level, iters, radius in _shading_stages(kind, max_iter_shading) if shading else []:
         t1 = time.perf_counter()
         shade = dict(kind=skind, curves=curves, mask=plate.mask, max_iter=iters, spp=spp,
                      ftol=ftol, solver=solver, previous=previous, temporal=temporal_shading * temporal, level=level,
@@ -170,6 +158,32 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
         seconds[stage] = time.perf_counter() - t1
         p, rot, tr = sf.p, sf.rotation, sf.translation
         status += f"; {stage}: {sf.status}"
+    return _plate_fit(model, kind, plate, calibration, curves, p, rot, tr, spp,
+                      dict(history=history, seconds=seconds, status=status), t0)
+
+
+def _shading_stages(kind, n):
+    """The shading stages of ``kind``'s fit, coarse to fine, with ``n`` iterations at most:
+    (name, model kind, ftol, pyramid level, iterations, trust radius). The blendshape model
+    first fits the pyramid's lower levels (the render at half resolution, a quarter of the
+    pixels to differentiate), then the kind fits the whole pyramid. For the simulation the
+    blendshape steps only have to bring the head near: at most 6, as a blendshape optimum is
+    a poor start for it (the same weights mean other shapes; from there the open-mouth
+    plate's simulation stage stalls at once)."""
+    final_ftol = 5e-3           # both kinds' last stage: a fair comparison, see the module doc
+    if kind == "blendshape":
+        return [("shading-coarse", "blendshape", 2e-2, 1, n, COARSE_RADIUS),
+                ("shading", "blendshape", final_ftol, 0, n, 1.0)]
+    return [("shading-coarse", "blendshape", 2e-2, 1, min(6, n), COARSE_RADIUS),
+            ("shading-simulation", "simulation", final_ftol, 0, n, SIMULATION_RADIUS)]
+
+
+def _plate_fit(model, kind, plate, calibration, curves, p, rot, tr, spp, record, t0):
+    """The PlateFit at the fitted controls ``p`` and pose: the posed surface, its render over
+    the plate, the curve residuals (px), the image RMS (over the mask and by region), the
+    simulation's activations and the lips' volume change; ``record``: the stages' history,
+    seconds and status; t0: the fit's start (``time.perf_counter``)."""
+    cam = plate.camera
     sm, vec = model.surface_model(kind), FitVector.of(model)
     _, xr = posed_surface(sm, vec.pack(p, rot, tr), vec)
     from ..measure.volume import lip_volume_change
@@ -184,12 +198,12 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
         res = sm.result_at(p)
         acts = {m.name: float(v) for m, v in zip(model.muscles, res.tracks.activations)}
         X = res.X
-    seconds["total"] = time.perf_counter() - t0
+    seconds = dict(record["seconds"], total=time.perf_counter() - t0)
     from .regions import region_rms
     return PlateFit(kind=kind, vector=vec, p=p, rotation=rot, translation=tr, surface=xr, render=render,
                     residual_px=residual, image_rms=float(np.sqrt(np.mean((render - plate.image)[inside] ** 2))),
-                    history=history, seconds=seconds, activations=acts,
-                    lip_volume_change=lip_volume_change(model, p, X), status=status,
+                    history=record["history"], seconds=seconds, activations=acts,
+                    lip_volume_change=lip_volume_change(model, p, X), status=record["status"],
                     image_rms_by_region=region_rms(render, plate.image, curves),
                     iris_px=final.iris_px(vec.pack(p, rot, tr), xr))
 

@@ -168,14 +168,7 @@ def read_bundle(path):
         N = len(X)
         tets = r.ids("tets", N, (None, 4))
         T = len(tets)
-        if T == 0:
-            r.fail("tets", "is empty")
-        vol = signed_volumes(X, tets)
-        if np.any(vol <= 0):
-            r.fail("tets", f"has {int((vol <= 0).sum())} inverted or degenerate tets (first: {int(np.argmax(vol <= 0))})")
-        deg = (triangles[:, 0] == triangles[:, 1]) | (triangles[:, 1] == triangles[:, 2]) | (triangles[:, 0] == triangles[:, 2])
-        if deg.any():
-            r.fail("triangles", f"has {int(deg.sum())} triangles with a repeated vertex")
+        _check_elements(r, X, tets, triangles)
         jaw_weights = r.get("jaw_weights", "f", (V,))
         vjw = r.get("volume_jaw_weights", "f", (N,))
         for name, w in (("jaw_weights", jaw_weights), ("volume_jaw_weights", vjw)):
@@ -186,25 +179,7 @@ def read_bundle(path):
         if np.abs(embed_weights.sum(1) - 1).max() > 1e-6:
             r.fail("embed_weights", "rows must sum to 1 (barycentric weights)")
         M = len(header["muscles"])
-        mt_off = r.get("muscle_tet_offsets", "i", (M + 1,))
-        mt = r.ids("muscle_tets", T, (int(mt_off[-1]),))
-        mf = r.get("muscle_fibers", "f", (int(mt_off[-1]), 3))
-        if len(mf) and np.abs(np.linalg.norm(mf, axis=1) - 1).max() > 1e-6:
-            r.fail("muscle_fibers", "must be unit vectors")
-        mc_off = r.get("muscle_centerline_offsets", "i", (M + 1,))
-        mc = r.get("muscle_centerlines", "f", (int(mc_off[-1]), 3))
-        ma_off = r.get("muscle_activation_curve_offsets", "i", (M + 1,))
-        ma = r.get("muscle_activation_curves", "f", (int(ma_off[-1]), 2))
-        for off, fld in ((mt_off, "muscle_tet_offsets"), (mc_off, "muscle_centerline_offsets"),
-                         (ma_off, "muscle_activation_curve_offsets")):
-            if off[0] != 0 or np.any(np.diff(off) < 0):
-                r.fail(fld, "must start at 0 and be non-decreasing")
-        muscles = []
-        for i, (mh, t, f, c, a) in enumerate(zip(header["muscles"], _split(mt, mt_off), _split(mf, mt_off),
-                                                 _split(mc, mc_off), _split(ma, ma_off))):
-            if len(t) == 0 or len(c) < 2:
-                r.fail("muscle_tets", f"muscle '{mh.get('name', i)}' is empty or has no centre-line")
-            muscles.append(Muscle(str(mh["name"]), t, f, c, a, str(mh.get("side", "M"))))
+        muscles = _read_muscles(r, header, T)
         lm_ids = r.ids("landmark_ids", V, (len(header["landmark_names"]),))
         cv_off = r.get("curve_offsets", "i", (len(header["curve_names"]) + 1,))
         cv = r.ids("curve_ids", V, (int(cv_off[-1]),))
@@ -232,6 +207,45 @@ def read_bundle(path):
             blendshape_activations=acts, track_displacements=track, scan_transform=scan_tf,
             parts=parts, meta=meta,
         )
+
+
+def _check_elements(r, X, tets, triangles):
+    """Refuse an empty tet mesh, inverted or degenerate tets (rest positions ``X``) and skin
+    triangles with a repeated vertex."""
+    if len(tets) == 0:
+        r.fail("tets", "is empty")
+    vol = signed_volumes(X, tets)
+    if np.any(vol <= 0):
+        r.fail("tets", f"has {int((vol <= 0).sum())} inverted or degenerate tets (first: {int(np.argmax(vol <= 0))})")
+    deg = (triangles[:, 0] == triangles[:, 1]) | (triangles[:, 1] == triangles[:, 2]) | (triangles[:, 0] == triangles[:, 2])
+    if deg.any():
+        r.fail("triangles", f"has {int(deg.sum())} triangles with a repeated vertex")
+
+
+def _read_muscles(r, header, T):
+    """The header's muscles with their tets (of ``T``), unit fibre directions, centre-lines and
+    activation curves, each stored flat with an offsets array: a list of Muscle."""
+    M = len(header["muscles"])
+    mt_off = r.get("muscle_tet_offsets", "i", (M + 1,))
+    mt = r.ids("muscle_tets", T, (int(mt_off[-1]),))
+    mf = r.get("muscle_fibers", "f", (int(mt_off[-1]), 3))
+    if len(mf) and np.abs(np.linalg.norm(mf, axis=1) - 1).max() > 1e-6:
+        r.fail("muscle_fibers", "must be unit vectors")
+    mc_off = r.get("muscle_centerline_offsets", "i", (M + 1,))
+    mc = r.get("muscle_centerlines", "f", (int(mc_off[-1]), 3))
+    ma_off = r.get("muscle_activation_curve_offsets", "i", (M + 1,))
+    ma = r.get("muscle_activation_curves", "f", (int(ma_off[-1]), 2))
+    for off, fld in ((mt_off, "muscle_tet_offsets"), (mc_off, "muscle_centerline_offsets"),
+                     (ma_off, "muscle_activation_curve_offsets")):
+        if off[0] != 0 or np.any(np.diff(off) < 0):
+            r.fail(fld, "must start at 0 and be non-decreasing")
+    muscles = []
+    for i, (mh, t, f, c, a) in enumerate(zip(header["muscles"], _split(mt, mt_off), _split(mf, mt_off),
+                                             _split(mc, mc_off), _split(ma, ma_off))):
+        if len(t) == 0 or len(c) < 2:
+            r.fail("muscle_tets", f"muscle '{mh.get('name', i)}' is empty or has no centre-line")
+        muscles.append(Muscle(str(mh["name"]), t, f, c, a, str(mh.get("side", "M"))))
+    return muscles
 
 
 def _read_parts(r, header):

@@ -246,37 +246,16 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
     if template is None:
         from ..template import build as build_template
         template = build_template()
-    if isinstance(neutral, (str, Path)):
-        say(f"reading {neutral}")
-        raw_V, raw_F = read_mesh(neutral)
-        name = str(neutral)
-    else:
-        raw_V, raw_F = (np.asarray(a) for a in neutral)
-        name = "target"
-    D = None
-    if blendshapes is not None:
-        say(f"reading blendshapes from {blendshapes}")
-        names, D = read_blendshapes(blendshapes, len(raw_V), np.asarray(raw_V, float))
-    target = clean(raw_V, raw_F, name=name, unit=unit, shapes=D)
+    target, names, D = _read_target(neutral, blendshapes, unit, say)
     lap("clean")
-    say(f"target: {len(target.vertices)} vertices" + (f" ({'; '.join(target.notes)})" if target.notes else ""))
-
     target, al, scaling, hidden = orient_target(target, template, unit, say)
     TL = template_landmarks(template)
     Va, Fg = al.apply(target.vertices), target.faces
     found.update(target=target, aligned=Va)
     lap("orient")
-
-    say("landmarks (fixed-stencil curvature)")
-    L, off_scan, fell = find_landmarks(Va, Fg, template)
+    L, off_scan, fell = _landmarks(Va, Fg, template, say)
     found["landmarks"] = L
-    if off_scan:
-        say(f"partial scan: {', '.join(off_scan)} off the scan (on its edge); their curves are left out and "
-            "the head is completed from the template")
-    for name, rule in fell.items():
-        say(f"warning: landmark {name}: {rule}; it falls back to {FALLBACK}, and its curves are left out")
     lap("landmarks")
-
     say("feature curves")
     Cg = curve_set(Va, Fg, L)
     Ct = curve_set(template.neutral, template.triangles, TL)
@@ -285,7 +264,72 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
         Ct, Cg = ({k: c for k, c in C.items() if not set(k) & left_out} for C in (Ct, Cg))
     found["curves"] = Cg
     lap("curves")
+    surf, Ct, Cg, opened, ears = _surface(template, TL, Va, Fg, L, Ct, Cg, scaling, say)
+    lap("surface")
+    model, vm = carry_anatomy(template, surf.positions, progress=say)
+    lap("volume")
+    S = np.diag([target.scale] * 3 + [1.0])
+    A = np.eye(4)
+    A[:3, :3], A[:3, 3] = al.R, al.t
+    model.scan_transform = A @ S
+    shapes = (D[:, target.source_ids] * target.scale) @ al.R.T if D is not None else None   # model frame, metres
+    kinds, jaw_split = _blendshapes(model, template, names, shapes, surf, Fg, expressions, say)
+    lap("blendshapes")
+    if len(model.blendshape_names):
+        say("muscle-track precompute (paper 000 Eq. 10-11)")
+        from ..sim.poisson import track_displacements
+        model.track_displacements = track_displacements(model)
+        if expressions == "simulate" and blendshapes is None:
+            from ..template.expressions import calibrate_activation_curves
+            calibrate_activation_curves(model)
+    lap("tracks")
+    stats = _stats(model, template, target, al, scaling, hidden, Va, Fg, L, TL, surf, vm, off_scan, fell, opened, ears)
+    stats.update(blendshapes={n: kinds.get(n) for n in model.blendshape_names} if blendshapes is not None
+                 else expressions, jaw_split=jaw_split, filled_from_template=model.meta.get("filled_from_template", []))
+    model.meta = {**model.meta, "generator": "invface.morph", "source": str(target.name),
+                  "template": {k: template.meta.get(k) for k in ("generator", "generator_version", "resolution")},
+                  "quality": stats["quality"], "morph": {**stats, "seconds": secs}}
+    result = MorphResult(target, Va, L, TL, Cg, Ct, surf, secs, stats)
+    return model, result
 
+
+def _read_target(neutral, blendshapes, unit, say):
+    """The scan (a path or (V, F)) cleaned (``target.clean``), with the folder's blendshapes
+    when given: (Target, blendshape names or None, their offsets (n, V_raw, 3) in the scan's
+    units or None)."""
+    if isinstance(neutral, (str, Path)):
+        say(f"reading {neutral}")
+        raw_V, raw_F = read_mesh(neutral)
+        name = str(neutral)
+    else:
+        raw_V, raw_F = (np.asarray(a) for a in neutral)
+        name = "target"
+    names = D = None
+    if blendshapes is not None:
+        say(f"reading blendshapes from {blendshapes}")
+        names, D = read_blendshapes(blendshapes, len(raw_V), np.asarray(raw_V, float))
+    target = clean(raw_V, raw_F, name=name, unit=unit, shapes=D)
+    say(f"target: {len(target.vertices)} vertices" + (f" ({'; '.join(target.notes)})" if target.notes else ""))
+    return target, names, D
+
+
+def _landmarks(Va, Fg, template, say):
+    """``find_landmarks`` on the aligned scan, saying which landmarks are off the scan and
+    which rules fell back: (landmarks, off-scan names, {name: rule that fell back})."""
+    say("landmarks (fixed-stencil curvature)")
+    L, off_scan, fell = find_landmarks(Va, Fg, template)
+    if off_scan:
+        say(f"partial scan: {', '.join(off_scan)} off the scan (on its edge); their curves are left out and "
+            "the head is completed from the template")
+    for name, rule in fell.items():
+        say(f"warning: landmark {name}: {rule}; it falls back to {FALLBACK}, and its curves are left out")
+    return L, off_scan, fell
+
+
+def _surface(template, TL, Va, Fg, L, Ct, Cg, scaling, say):
+    """The template's skin morphed onto the aligned scan (``morph_surface``), its eye and mouth
+    openings mapped onto the scan's rims where it has them (the curves across a mapped opening
+    left out): (surface, template curves, scan curves, openings mapped, ear boxes)."""
     rid, rpos, opened = map_openings(template.neutral, template.triangles, TL, Va, Fg, L)
     if opened:
         say(f"openings mapped onto the scan's rims: {', '.join(opened)}")
@@ -296,23 +340,20 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
     As, ts = scaling.similarity
     surf = morph_surface(template.neutral, template.triangles, Va, Fg, Ct, Cg, rims=(rid, rpos), no_snap=ears,
                          seams=seams, carried=template.neutral @ As.T + ts, progress=say)
-    lap("surface")
+    return surf, Ct, Cg, opened, ears
 
-    model, vm = carry_anatomy(template, surf.positions, progress=say)
-    lap("volume")
-    S = np.diag([target.scale] * 3 + [1.0])
-    A = np.eye(4)
-    A[:3, :3], A[:3, 3] = al.R, al.t
-    model.scan_transform = A @ S
-    # blendshapes
-    solver = SurfacePoisson(template.neutral, template.triangles)
-    kinds, jaw_split = {}, {}
-    if blendshapes is not None:
+
+def _blendshapes(model, template, names, shapes, surf, Fg, expressions, say):
+    """The actor's blendshapes, set on ``model``: the folder's (``shapes``: (n, V_scan, 3) m in
+    the model frame, with ``names``) transferred onto the morphed skin with their jaw rotation
+    split out and the missing ARKit controls filled from the template; else the template's
+    carried (``expressions`` "copy") or simulated on the new anatomy ("simulate"). Returns
+    ({name: recognised control}, {name: jaw split}) for the folder's shapes ({} otherwise)."""
+    if shapes is not None:
         say("importing the blendshapes")
-        D = (D[:, target.source_ids] * target.scale) @ al.R.T          # model frame, metres
+        solver = SurfacePoisson(template.neutral, template.triangles)
         model.blendshape_names = names
-        model.blendshapes, jaws, jaw_split = split_jaw(model, names, _transfer(D, surf, Fg, solver), surf.snapped)
-        kinds = {n: recognised(n) for n in names}
+        model.blendshapes, jaws, jaw_split = split_jaw(model, names, _transfer(shapes, surf, Fg, solver), surf.snapped)
         model.meta["blendshape_jaw"] = jaws
         for n, js in jaw_split.items():
             say(f"{n}: jaw rotation {np.degrees(np.linalg.norm(js['jaw'][:3])):.1f} deg split out "
@@ -320,7 +361,8 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
         filled = fill_from_template(model, template, names)
         if filled:
             say(f"{len(filled)} ARKit controls the folder lacks filled from the template: {', '.join(filled)}")
-    elif expressions == "copy" and len(template.blendshape_names):
+        return {n: recognised(n) for n in names}, jaw_split
+    if expressions == "copy" and len(template.blendshape_names):
         say("carrying the template's blendshapes onto the actor")
         model.blendshape_names = list(template.blendshape_names)
         model.blendshapes = carry_offsets(template.blendshapes, template.neutral, model.neutral,
@@ -329,23 +371,19 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
         model.meta["blendshape_jaw"] = dict(template.meta.get("blendshape_jaw", {}))
         model.muscles = [replace(m, activation_curve=t.activation_curve) for m, t in zip(model.muscles, template.muscles)]
     elif expressions == "simulate":
-        from ..template.expressions import calibrate_activation_curves, simulate_blendshapes
+        from ..template.expressions import simulate_blendshapes
         simulate_blendshapes(model, progress=say)
-    lap("blendshapes")
-    if len(model.blendshape_names):
-        say("muscle-track precompute (paper 000 Eq. 10-11)")
-        from ..sim.poisson import track_displacements
-        model.track_displacements = track_displacements(model)
-        if expressions == "simulate" and blendshapes is None:
-            calibrate_activation_curves(model)
-    lap("tracks")
+    return {}, {}
 
+
+def _stats(model, template, target, al, scaling, hidden, Va, Fg, L, TL, surf, vm, off_scan, fell, opened, ears):
+    """The build's figures for ``ModelBuild.describe`` and the bundle's meta: unit and scale,
+    alignment, landmark and surface distances (mm), fallbacks, the tet quality."""
     tri, bw, _ = closest_points(np.array([TL[k] for k in TL]), template.neutral, template.triangles)
     on_model = dict(zip(TL, barycentric_points(model.neutral, template.triangles, tri, bw)))
     dist = closest_points(model.neutral[surf.snapped], Va, Fg)[2]
     face = closest_points(model.neutral[face_vertices(model)], Va, Fg)[2] * 1000
-    q = quality_summary(model.rest_positions, model.tets)
-    stats = {
+    return {
         "unit": target.unit, "scale": target.scale, "unit_summary": scaling.summary,
         "face_scale": scaling.face_scale, "cleaning": target.notes, "hidden_scalp": hidden,
         "symmetry_error_mm": al.frame.symmetry_error * 1000,
@@ -359,14 +397,7 @@ def _build(neutral, blendshapes, template, unit, expressions, progress, secs, fo
         "openings_mapped": opened, "ear_boxes": len(ears), "snapped_fraction": float(surf.snapped.mean()),
         "inverted_triangles": surf.inverted,
         "triangle_relax_rounds": surf.relax_rounds, "tet_relaxed_vertices": vm.relaxed_vertices, "inner_pushed": vm.pushed,
-        "tet_relax_rounds": vm.relax_rounds, "quality": q,
+        "tet_relax_rounds": vm.relax_rounds, "quality": quality_summary(model.rest_positions, model.tets),
         "centerlines_inside": inside_fraction(model.rest_positions, model.tets,
                                              np.concatenate([m.centerline for m in model.muscles])),
-        "blendshapes": {n: kinds.get(n) for n in model.blendshape_names} if blendshapes is not None else expressions,
-        "jaw_split": jaw_split, "filled_from_template": model.meta.get("filled_from_template", []),
     }
-    model.meta = {**model.meta, "generator": "invface.morph", "source": str(target.name),
-                  "template": {k: template.meta.get(k) for k in ("generator", "generator_version", "resolution")},
-                  "quality": q, "morph": {**stats, "seconds": secs}}
-    result = MorphResult(target, Va, L, TL, Cg, Ct, surf, secs, stats)
-    return model, result

@@ -230,15 +230,7 @@ def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), sea
     solver = SurfacePoisson(Vt, Ft)
     Vm = Vt + solver.solve(ids, disp)
     if seams is not None and len(seams):
-        # closed slits: both sides on the target point nearest their midpoint, then the
-        # Poisson morph again with them as Dirichlet data
-        stri, sw, _ = closest_points(0.5 * (Vm[seams[:, 0]] + Vm[seams[:, 1]]), Vg, Fg)
-        spos = barycentric_points(Vg, Fg, stri, sw)
-        sid = seams.T.ravel()
-        rid, rpos = np.concatenate([rid, sid]), np.concatenate([rpos, spos, spos])
-        rtri, rw = np.concatenate([rtri, stri, stri]), np.concatenate([rw, sw, sw])
-        keep = ~np.isin(ids, sid)
-        ids, disp = np.concatenate([ids[keep], sid]), np.concatenate([disp[keep], np.concatenate([spos, spos]) - Vt[sid]])
+        ids, disp, (rid, rpos, rtri, rw) = _hold_seams(Vt, Vm, Vg, Fg, seams, ids, disp, (rid, rpos, rtri, rw))
         say(f"{len(seams)} closed-slit vertex pairs held together on the target")
         Vm = Vt + solver.solve(ids, disp)
 
@@ -274,13 +266,36 @@ def morph_surface(Vt, Ft, Vg, Fg, curves_t, curves_g, rims=None, no_snap=(), sea
         ok &= ~fold
         say(f"{int(bad.sum())} triangles still folded: {int(fold.sum())} vertices around them left to the fill")
     if not ok.all():
-        say(f"{int((~ok).sum())} template vertices off the target: filled by a second Poisson solve")
-        D, held = np.where(ok[:, None], Vs - Vt, 0.0), ok.copy()
-        if carried is not None:
-            far = ~ok
-            far[far] = cKDTree(Vt[ok]).query(Vt[far])[0] > CARRY_BAND
-            D[far], held[far] = carried[far] - Vt[far], True
-            say(f"{int(far.sum())} of them follow the template carried by the face's similarity")
-        fixed = np.flatnonzero(held)
-        Vs = Vt + solver.solve(fixed, D[fixed])
+        Vs = _fill(Vt, Vs, ok, solver, carried, say)
     return SurfaceMorph(Vs, Vm, ok, int(bad.sum()), rounds, len(ids), tri, w)
+
+
+def _hold_seams(Vt, Vm, Vg, Fg, seams, ids, disp, rims):
+    """Closed slits (``seams`` (P, 2) template vertex pairs): both sides on the target point
+    nearest their Poisson-morphed midpoint (``Vm``), added to the Dirichlet data (ids,
+    displacements) in place of any curve data they had, and to the rims (ids, positions,
+    target triangles, barycentrics) the snap keeps. Returns (ids, disp, rims)."""
+    rid, rpos, rtri, rw = rims
+    stri, sw, _ = closest_points(0.5 * (Vm[seams[:, 0]] + Vm[seams[:, 1]]), Vg, Fg)
+    spos = barycentric_points(Vg, Fg, stri, sw)
+    sid = seams.T.ravel()
+    rims = (np.concatenate([rid, sid]), np.concatenate([rpos, spos, spos]),
+            np.concatenate([rtri, stri, stri]), np.concatenate([rw, sw, sw]))
+    keep = ~np.isin(ids, sid)
+    ids, disp = np.concatenate([ids[keep], sid]), np.concatenate([disp[keep], np.concatenate([spos, spos]) - Vt[sid]])
+    return ids, disp, rims
+
+
+def _fill(Vt, Vs, ok, solver, carried, say):
+    """The skin with the template vertices off the target (``~ok``) filled by a Poisson solve
+    held at the snapped ones (``Vs``); with ``carried``, those more than ``CARRY_BAND`` from any
+    snapped vertex are held at the template carried by the face's similarity."""
+    say(f"{int((~ok).sum())} template vertices off the target: filled by a second Poisson solve")
+    D, held = np.where(ok[:, None], Vs - Vt, 0.0), ok.copy()
+    if carried is not None:
+        far = ~ok
+        far[far] = cKDTree(Vt[ok]).query(Vt[far])[0] > CARRY_BAND
+        D[far], held[far] = carried[far] - Vt[far], True
+        say(f"{int(far.sum())} of them follow the template carried by the face's similarity")
+    fixed = np.flatnonzero(held)
+    return Vt + solver.solve(fixed, D[fixed])

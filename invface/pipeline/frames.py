@@ -52,23 +52,18 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
     frame: {name, index, time, skipped, kinds: {kind: {curve_rms_px, flagged}}, failed, error}."""
     from ..fit.landmarks import LandmarkTracker
     kinds = model_kinds(kinds)
-    starts = dict(starts or {})
-    history = {k: [] for k in kinds}
+    chain = _Chain(model, dict(starts or {}), {k: [] for k in kinds})
     rows = []
     single = len(clip) == 1
     with LandmarkTracker(options.get("face", 0)) as tracker:
         for frame in clip.frames(start, stop):
             folder = None if out is None else Path(out) if single else Path(out) / frame.name
             h = frame_hash(frame.digest, inputs)
-            done = {k: finished_record(folder, k, h) for k in kinds} if (skip and folder is not None) else {}
-            done = {k: r for k, r in done.items() if r is not None}
+            done = _finished_before(folder, kinds, h) if skip else {}
             row = {"name": frame.name, "index": frame.index, "time": frame.time, "skipped": sorted(done),
                    "kinds": {}, "failed": {}}
             for k, rec in done.items():
-                row["kinds"][k] = {"curve_rms_px": rec.get("curve_rms_px"), "flagged": rec.get("flagged", "")}
-                if not rec.get("flagged"):
-                    starts[k] = start_from(model, rec)
-                    history[k].append(rec.get("curve_rms_px", 0.0))
+                chain.take(k, rec.get("curve_rms_px"), rec.get("flagged", ""), row, start_from(model, rec))
             todo = tuple(k for k in kinds if k not in done)
             if not todo:
                 _say(progress, message=f"{frame.name}: finished before from the same inputs, skipped")
@@ -77,26 +72,11 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
                     on_frame(None, folder, row)
                 continue
             _say(progress, message=f"frame {frame.name} (t = {frame.time:.2f} s)")
-
-            def detector(image, name, t=frame.time):
-                points = tracker(image, t, name)
-                detector.scores = tracker.scores          # the peer's ARKit scores (find_curves)
-                return points
-
-            def finished(ff, kind, folder=folder):
-                fit = ff.fits[kind]
-                why = flag_reason(fit.curve_rms_px, fit.lip_volume_change, history[kind])
-                ff.record[kind] = {"input_hash": h, "run_inputs": inputs, "frame": frame.index, "time": frame.time,
-                                   "flagged": why, **(record or {})}
-                if why:
-                    ff.warnings.append(f"{ff.name} {kind}: flagged: {why}; the next frame does not start from it")
-                if folder is not None:
-                    ff.save_kind(folder, kind)
-                if on_kind is not None:
-                    on_kind(ff, kind)
+            stamp = {"input_hash": h, "run_inputs": inputs, "frame": frame.index, "time": frame.time}
             try:
-                ff = fit_frame(model, frame.plate, calibration, curves, kinds=todo, starts=starts,
-                               progress=progress, on_kind=finished, detector=detector, crop=single, **options)
+                ff = fit_frame(model, frame.plate, calibration, curves, kinds=todo, starts=chain.starts,
+                               progress=progress, on_kind=chain.finisher(stamp, record, folder, on_kind),
+                               detector=_detector(tracker, frame.time), crop=single, **options)
             except InvfaceError as e:
                 if single:
                     raise
@@ -107,11 +87,7 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
             if folder is not None and ff.fits:
                 ff.save(folder, quick=not single)
             for k, fit in ff.fits.items():
-                why = ff.record[k]["flagged"]
-                row["kinds"][k] = {"curve_rms_px": fit.curve_rms_px, "flagged": why}
-                if not why:
-                    starts[k] = fit
-                    history[k].append(fit.curve_rms_px)
+                chain.take(k, fit.curve_rms_px, ff.record[k]["flagged"], row, fit)
             row["failed"] = dict(ff.failed)
             if keep:
                 row["fit"] = ff
@@ -119,3 +95,53 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
             if on_frame is not None:
                 on_frame(ff, folder, row)
     return rows
+
+
+def _finished_before(folder, kinds, input_hash):
+    """{kind: fit.json record} of the kinds finished in ``folder`` from the same inputs."""
+    if folder is None:
+        return {}
+    done = {k: finished_record(folder, k, input_hash) for k in kinds}
+    return {k: r for k, r in done.items() if r is not None}
+
+
+def _detector(tracker, t):
+    """The landmark detector of a frame at time ``t`` (s): the clip's ``LandmarkTracker``, its
+    peer ARKit scores kept on the function (``find_curves`` reads them)."""
+    def detector(image, name):
+        points = tracker(image, t, name)
+        detector.scores = tracker.scores
+        return points
+    return detector
+
+
+class _Chain:
+    """What carries from frame to frame: each kind's warm start (the last unflagged frame's fit
+    or record) and the curve RMS of its unflagged frames (``flag_reason``'s history)."""
+
+    def __init__(self, model, starts, history):
+        self.model, self.starts, self.history = model, starts, history
+
+    def take(self, kind, rms, flagged, row, start):
+        """Record a finished kind of a frame in its summary ``row``; an unflagged one starts the
+        next frame (``start``: a PlateFit or ``start_from``'s record)."""
+        row["kinds"][kind] = {"curve_rms_px": rms, "flagged": flagged}
+        if not flagged:
+            self.starts[kind] = start
+            self.history[kind].append(rms if rms is not None else 0.0)
+
+    def finisher(self, stamp, record, folder, on_kind):
+        """``fit_frame``'s on_kind for one frame: flag the kind's fit (``flag_reason``), put
+        ``stamp`` (input hash, frame, time), the flag and ``record`` in its fit.json, write it
+        to ``folder`` and call the caller's ``on_kind``."""
+        def finished(ff, kind):
+            fit = ff.fits[kind]
+            why = flag_reason(fit.curve_rms_px, fit.lip_volume_change, self.history[kind])
+            ff.record[kind] = {**stamp, "flagged": why, **(record or {})}
+            if why:
+                ff.warnings.append(f"{ff.name} {kind}: flagged: {why}; the next frame does not start from it")
+            if folder is not None:
+                ff.save_kind(folder, kind)
+            if on_kind is not None:
+                on_kind(ff, kind)
+        return finished

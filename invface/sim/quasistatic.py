@@ -526,30 +526,11 @@ class Simulator:
         definite (``_contact_region_indefinite``: a proof that its factorisation would fail). A
         shifted matrix is M + mu diag|H| with H the exact Hessian. When none works (a singular
         projected matrix), a scaled gradient step."""
-        solver, diag = self._solver, self.pattern.diag_slot
+        diag = self.pattern.diag_slot
         relative = float(np.linalg.norm(g)) / (self.force_scale * np.sqrt(len(g)))
-        if memory[1] is not None and self._exact_factor == self._factorisations and (
-                np.linalg.norm(data - memory[1]) <= self.CG_GATE * np.linalg.norm(memory[1])):
-            t = time.perf_counter()
-            dx = linsolve.preconditioned_cg(self.pattern.matvec(data), solver.solve, -g,
-                                            rtol=min(self.CG_RTOL, relative), max_iter=self.CG_ITER)
-            secs["solve"] += time.perf_counter() - t
-            if dx is not None and dx @ g < 0:
-                return dx
-
-        def direction(values):
-            t = time.perf_counter()
-            try:
-                self._factor(values)
-            except linsolve.NotSPD:
-                secs["factor"] += time.perf_counter() - t
-                return None
-            secs["factor"] += time.perf_counter() - t
-            t = time.perf_counter()
-            dx = -solver.solve(g)
-            secs["solve"] += time.perf_counter() - t
-            return dx if dx @ g < 0 else None
-
+        dx = self._held_factor_step(data, g, relative, secs, memory)
+        if dx is not None:
+            return dx
         base = {"exact": data}
 
         def matrix(kind):
@@ -578,7 +559,7 @@ class Simulator:
                 secs["factor"] += time.perf_counter() - t
                 if indefinite:
                     continue
-            dx = direction(values)
+            dx = self._factored_direction(values, g, secs)
             if dx is not None:
                 memory[0] = rung
                 if rung == 0:
@@ -586,6 +567,36 @@ class Simulator:
                 return dx
         memory[0] = len(ladder)
         return -g / (np.abs(base["projected"][diag]).max() + 1e-30)
+
+    def _held_factor_step(self, data, g, relative, secs, memory):
+        """``_newton_step``'s inexact step: conjugate gradients on the exact Hessian (data
+        (nnz,)) preconditioned with the held factorisation, to the forcing term min(CG_RTOL,
+        ``relative``), when that factorisation is the solver's latest and its Hessian
+        (``memory[1]``) is within CG_GATE of this one; None when not tried, not converged or
+        not a descent direction."""
+        if not (memory[1] is not None and self._exact_factor == self._factorisations and (
+                np.linalg.norm(data - memory[1]) <= self.CG_GATE * np.linalg.norm(memory[1]))):
+            return None
+        t = time.perf_counter()
+        dx = linsolve.preconditioned_cg(self.pattern.matvec(data), self._solver.solve, -g,
+                                        rtol=min(self.CG_RTOL, relative), max_iter=self.CG_ITER)
+        secs["solve"] += time.perf_counter() - t
+        return dx if dx is not None and dx @ g < 0 else None
+
+    def _factored_direction(self, values, g, secs):
+        """-M^-1 g with M (data ``values``) factored; None when M is not positive definite or
+        the direction does not descend."""
+        t = time.perf_counter()
+        try:
+            self._factor(values)
+        except linsolve.NotSPD:
+            secs["factor"] += time.perf_counter() - t
+            return None
+        secs["factor"] += time.perf_counter() - t
+        t = time.perf_counter()
+        dx = -self._solver.solve(g)
+        secs["solve"] += time.perf_counter() - t
+        return dx if dx @ g < 0 else None
 
     CONTACT_RINGS = 4           # see _contact_region_indefinite
     REGION_FRACTION = 0.1       # ... and the largest region, as a fraction of the DOFs, it tests

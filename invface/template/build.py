@@ -80,19 +80,8 @@ def generate(resolution=1.0, progress=None, expressions=True):
     coarse, fine = build_grids(n_alpha, n_beta, factor)
 
     say(f"flesh: {n_layers} layers of prisms")
-    ni, nj = coarse.shape
-    skin_grid_pts = coarse.positions()[: ni * nj].reshape(ni, nj, 3)
-    r_inner = lid_inner_radii(coarse.alpha, coarse.beta, coarse.r, coarse.r - depth_of(skin_grid_pts))
-    R = layer_radii(coarse.r, r_inner, n_layers)
-    X = np.concatenate([coarse.positions(R[k]) for k in range(n_layers + 1)])
+    X, tets, q, lids = _flesh(coarse, n_layers)
     Ns = len(coarse.positions())
-    lids = _lid_sides(coarse)
-    X = open_lids(X, *lids, column=np.arange(len(X)) % Ns)
-    tets = orient(X, prism_tets(coarse.triangles, Ns, n_layers))
-    q = quality_summary(X, tets)
-    if q["inverted"] or q["min_dihedral_deg"] < MIN_DIHEDRAL_DEG or q["min_radius_ratio"] < MIN_RADIUS_RATIO:
-        raise MeshError(f"generated flesh mesh fails the quality bounds: {q}")
-
     inner = np.arange(n_layers * Ns, (n_layers + 1) * Ns)
     region = _regions(X[inner])
     fixed_cranium = inner[region == 0]
@@ -137,17 +126,43 @@ def generate(resolution=1.0, progress=None, expressions=True):
               "quality": q},
     )
     if expressions:
-        from ..sim.poisson import track_displacements
-        from .arkit_shapes import add_arkit_shapes
-        from .expressions import add_blinks, calibrate_activation_curves
-        say("ARKit blendshapes (sculpted, carried from ICT-FaceKit)")
-        add_arkit_shapes(model)
-        add_blinks(model, Vf_closed)
-        say("muscle-track precompute (Poisson solves, Eq. 10-11)")
-        model.track_displacements = track_displacements(model)
-        calibrate_activation_curves(model)
+        _add_expressions(model, Vf_closed, say)
         model.meta["build_seconds"] = round(time.perf_counter() - t0, 2)
     return model
+
+
+def _flesh(coarse, n_layers):
+    """The flesh's tets: ``n_layers`` layers of prisms under the coarse skin grid down to the
+    depth field, the lids opened, split into tets and checked against the quality bounds.
+    Returns (rest positions (N, 3) m, tets (T, 4), quality summary, ``_lid_sides(coarse)``)."""
+    ni, nj = coarse.shape
+    skin_grid_pts = coarse.positions()[: ni * nj].reshape(ni, nj, 3)
+    r_inner = lid_inner_radii(coarse.alpha, coarse.beta, coarse.r, coarse.r - depth_of(skin_grid_pts))
+    R = layer_radii(coarse.r, r_inner, n_layers)
+    X = np.concatenate([coarse.positions(R[k]) for k in range(n_layers + 1)])
+    Ns = len(coarse.positions())
+    lids = _lid_sides(coarse)
+    X = open_lids(X, *lids, column=np.arange(len(X)) % Ns)
+    tets = orient(X, prism_tets(coarse.triangles, Ns, n_layers))
+    q = quality_summary(X, tets)
+    if q["inverted"] or q["min_dihedral_deg"] < MIN_DIHEDRAL_DEG or q["min_radius_ratio"] < MIN_RADIUS_RATIO:
+        raise MeshError(f"generated flesh mesh fails the quality bounds: {q}")
+    return X, tets, q, lids
+
+
+def _add_expressions(model, closed_skin, say):
+    """The head's controls: the ARKit blendshapes (``arkit_shapes``), the kinematic blinks
+    (from the skin with its lids closed, ``closed_skin`` (V, 3)), their muscle-track
+    precompute (Eq. 10-11) and the muscles' activation curves."""
+    from ..sim.poisson import track_displacements
+    from .arkit_shapes import add_arkit_shapes
+    from .expressions import add_blinks, calibrate_activation_curves
+    say("ARKit blendshapes (sculpted, carried from ICT-FaceKit)")
+    add_arkit_shapes(model)
+    add_blinks(model, closed_skin)
+    say("muscle-track precompute (Poisson solves, Eq. 10-11)")
+    model.track_displacements = track_displacements(model)
+    calibrate_activation_curves(model)
 
 
 def cache_dir() -> Path:

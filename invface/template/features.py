@@ -55,10 +55,17 @@ def find_features(fine, V):
 
     fine: the fine SkinGrid; V (Vf,3) its vertex positions.
     """
-    tree = cKDTree(V)
-    ni, nj = fine.shape
+    ni, _ = fine.shape
+    profile = fine.grid_index()[ni // 2, :]          # midline, bottom to top
+    L = _feature_landmarks(fine, V, profile)
+    return L, _feature_curves(fine, V, L, profile)
+
+
+def _feature_landmarks(fine, V, profile):
+    """The landmarks (name -> vertex id) on the fine skin: slit corners, the profile's points,
+    the nostrils' rims, the silhouette's cheek and jaw points and the brows."""
+    ni, _ = fine.shape
     idx = fine.grid_index()
-    profile = idx[ni // 2, :]                        # midline, bottom to top
     P = V[profile]
     L = {}
     mouth_up = fine.slit_vertices("mouth", "upper")
@@ -100,21 +107,32 @@ def find_features(fine, V):
             k += 1
         L[f"alar_{side}"] = int(idx[cols[k], row])
 
-    def silhouette(y, side):
-        m = (np.abs(V[:, 1] - y) < 0.0015) & (V[:, 2] > 0.03)
-        cand = np.nonzero(m)[0]
-        return int(cand[np.argmax(V[cand, 0])] if side == "L" else cand[np.argmin(V[cand, 0])])
-
     for s in "LR":
-        L[f"cheek_contour_{s}"] = silhouette(0.015, s)
-        L[f"jaw_contour_{s}"] = silhouette(-0.045, s)
+        L[f"cheek_contour_{s}"] = _silhouette(V, 0.015, s)
+        L[f"jaw_contour_{s}"] = _silhouette(V, -0.045, s)
         sx = 1 if s == "L" else -1
         m = (np.abs(V[:, 0] - sx * 0.030) < 0.002) & (V[:, 1] > 0.045) & (V[:, 1] < 0.075)
         cand = np.nonzero(m)[0]
         L[f"brow_{s}"] = int(cand[np.argmax(V[cand, 2])])
+    return L
 
+
+def _silhouette(V, y, side):
+    """The skin's outermost vertex on ``side`` ("L": +X) at height ``y`` (m), in front."""
+    m = (np.abs(V[:, 1] - y) < 0.0015) & (V[:, 2] > 0.03)
+    cand = np.nonzero(m)[0]
+    return int(cand[np.argmax(V[cand, 0])] if side == "L" else cand[np.argmin(V[cand, 0])])
+
+
+def _feature_curves(fine, V, L, profile):
+    """The feature curves (name -> vertex ids) on the fine skin: the slits' lids and inner
+    lips, the outer lips, brows and jaw line as frontal curves, the nose's bridge and base,
+    and the profile."""
+    tree = cKDTree(V)
+    P = V[profile]
+    tip = int(np.argmax(P[:, 2]))
     C = {}
-    C["lip_inner_upper"] = mouth_up
+    C["lip_inner_upper"] = fine.slit_vertices("mouth", "upper")
     C["lip_inner_lower"] = fine.slit_vertices("mouth", "lower")
     for s in "LR":
         C[f"eye_{s}_upper"] = fine.slit_vertices(f"eye_{s}", "upper")
@@ -134,4 +152,4 @@ def find_features(fine, V):
     jaw_xy = [(0.068, -0.015), (0.062, -0.045), (0.048, -0.064), (0.026, -0.076), (0.0, -0.080)]
     C["jaw_line"] = frontal_curve(tree, _mirror_xy(jaw_xy) + jaw_xy[::-1][1:])
     C["profile"] = profile
-    return L, C
+    return C
