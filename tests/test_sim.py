@@ -579,6 +579,8 @@ def test_newton_steps_climb_the_fallback_ladder_from_one_rung_below_the_last(con
                            _factorisations=0, _exact_factor=-1)
     fake._ladder = lambda: Simulator._ladder(fake)
     fake._factor = lambda values: Simulator._factor(fake, values)
+    fake._held_factor_step = lambda *a: Simulator._held_factor_step(fake, *a)
+    fake._factored_direction = lambda *a: Simulator._factored_direction(fake, *a)
     ladder = fake._ladder()
     shifts = Simulator.CONTACT_SHIFTS if contacts else Simulator.SHIFTS
     assert ladder == [("exact", 0.0)] + ([("contacts", 0.0)] if contacts else []) \
