@@ -56,16 +56,30 @@ def closest_points(points, V, F, k=16):
 
     Returns triangle ids (P,), barycentric weights (P,3) and distances (P,) in the units of V.
     The candidates are the k triangles with the nearest centroids, exact for meshes with
-    triangles of similar size.
+    triangles of similar size. For many queries on one mesh, build a ``TriangleLocator`` once.
     """
-    points = np.asarray(points, float).reshape(-1, 3)
-    V, F = np.asarray(V, float), np.asarray(F, np.int64)
-    k = min(k, len(F))
-    tree = cKDTree(V[F].mean(1))
-    if len(points) > CHUNK:          # k candidates per point: bounded memory on a large scan
-        parts = [_closest(points[i:i + CHUNK], V, F, k, tree) for i in range(0, len(points), CHUNK)]
-        return tuple(np.concatenate(a) for a in zip(*parts))
-    return _closest(points, V, F, k, tree)
+    return TriangleLocator(V, F).closest(points, k)
+
+
+class TriangleLocator:
+    """Closest-point queries on one triangle mesh (V (n,3), F (f,3)), the KD-tree of its
+    triangles' centroids built once: what an ICP or an optimiser that measures against the
+    same mesh at every step queries (``closest_points`` builds one per call)."""
+
+    def __init__(self, V, F):
+        self.V, self.F = np.asarray(V, float), np.asarray(F, np.int64)
+        self.tree = cKDTree(self.V[self.F].mean(1))
+
+    def closest(self, points, k=16):
+        """``closest_points`` of points (P,3) on this mesh: triangle ids (P,), barycentric
+        weights (P,3), distances (P,)."""
+        points = np.asarray(points, float).reshape(-1, 3)
+        k = min(k, len(self.F))
+        if len(points) > CHUNK:          # k candidates per point: bounded memory on a large scan
+            parts = [_closest(points[i:i + CHUNK], self.V, self.F, k, self.tree)
+                     for i in range(0, len(points), CHUNK)]
+            return tuple(np.concatenate(a) for a in zip(*parts))
+        return _closest(points, self.V, self.F, k, self.tree)
 
 
 def candidate_points(points, V, F, k=16):

@@ -3,7 +3,9 @@
 1. Axes from the inertia tensor of the surface as a thin shell (mass = area).
 2. The left/right symmetry plane: of the three planes through the centre of mass normal to
    an axis, the one with the least reflection error (mean distance from each reflected point
-   to the closest point on the mesh).
+   to the closest point on the mesh). A head about as deep as it is wide has two nearly equal
+   moments, and its axes in their plane are arbitrary: the plane of those two axes is also
+   searched (``symmetry_normal``), and a direction there that reflects far better wins.
 3. The profile curve (mesh ∩ symmetry plane); nose-tip candidates are the local maxima of
    the distance from the centre of mass that stick out of the profile on both sides (bridge
    above, subnasale below) as a wedge, the sharpest ones first. The paper takes the best
@@ -28,7 +30,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ..errors import MeshError
-from ..mesh.closest import barycentric_points, closest_points
+from ..mesh.closest import TriangleLocator, barycentric_points
 from ..mesh.sections import arc_length, plane_sections, resample
 from ..mesh.triangles import edge_components, triangle_areas
 
@@ -36,6 +38,9 @@ NOSE_ARC = 0.015         # m along the profile either side of a nose-tip candida
 MAX_NOSE_ANGLE_DEG = 150      # a blunt or hole-broken nose still counts; the template alignment chooses
 NOSE_CANDIDATES = 8      # profile wedges tried as the nose tip
 FULL_ICP = 3             # of the candidate poses after a quick ICP, the best refined fully
+SYMMETRY_STEP_DEG = 10   # the symmetry plane's normal is searched this many degrees apart ...
+SYMMETRY_SCAN_SAMPLES = 300   # ... on this many samples, and taken over the inertia axis ...
+SYMMETRY_GAIN = 0.8      # ... when its reflection error is below this share of the axis's
 HEAD_REACH = 0.12        # m: the head around a nose tip (its centroid sets "forward")
 REFINE_HEIGHT = 0.06     # m: the symmetry plane is refined on the nose and cheeks, this far
 REFINE_DEPTH = 0.075     # above/below and behind the nose tip; their reflections are measured
@@ -67,11 +72,12 @@ def shell_inertia(V, F):
     return c, np.trace(C) * np.eye(3) - C
 
 
-def symmetry_error(V, F, samples, origin, normal):
-    """Mean distance (m) from the reflections of samples (n,3) across the plane to the mesh."""
+def symmetry_error(mesh, samples, origin, normal):
+    """Mean distance (m) from the reflections of samples (n,3) across the plane to the mesh
+    (a ``TriangleLocator``)."""
     n = normal / np.linalg.norm(normal)
     refl = samples - 2 * ((samples - origin) @ n)[:, None] * n
-    return float(closest_points(refl, V, F)[2].mean())
+    return float(mesh.closest(refl)[2].mean())
 
 
 def _samples(V, n, seed=0):
@@ -158,7 +164,8 @@ def refine_frame(V, F, fr, c, n_samples=1500):
             n = R[0] + a * R[1] + b * R[2]
             return origin + d * R[0], n / np.linalg.norm(n)
 
-        res = minimize(lambda q: symmetry_error(V, Fr, region, *plane(q)), np.zeros(3),
+        mesh = TriangleLocator(V, Fr)
+        res = minimize(lambda q: symmetry_error(mesh, region, *plane(q)), np.zeros(3),
                        method="Nelder-Mead",
                        options={"xatol": 1e-4, "fatol": 1e-7, "initial_simplex":
                                 np.array([[0, 0, 0], [0.05, 0, 0], [0, 0.05, 0], [0, 0, 0.005]])})
@@ -178,6 +185,31 @@ def refine_frame(V, F, fr, c, n_samples=1500):
     return Frame(origin, R, tip, err, P)
 
 
+def symmetry_normal(mesh, samples, c, moments, axes, step=SYMMETRY_STEP_DEG):
+    """The normal (3,) of the left/right symmetry plane through ``c`` and its reflection error
+    (m) of ``samples`` onto the mesh (a ``TriangleLocator``): the inertia axis (``axes`` (3, 3)
+    columns, ``moments`` ascending) with the least error, as the paper takes it, unless a
+    direction in the plane of the two axes of nearest moments reflects the samples at least
+    SYMMETRY_GAIN nearer. A head about as deep as it is wide has two nearly equal moments,
+    and its axes in their plane are arbitrary: the inertia alone can tilt the plane off the
+    nose. That plane is searched every ``step`` degrees on a few samples, then a degree apart
+    around the best."""
+    errs = [symmetry_error(mesh, samples, c, axes[:, k]) for k in range(3)]
+    best = int(np.argmin(errs))
+    i = int(np.argmin(np.diff(moments) / moments[1:]))          # the pair (i, i + 1) nearest in moment
+    a, b = axes[:, i], axes[:, i + 1]
+    few = samples[:SYMMETRY_SCAN_SAMPLES]
+
+    def scan(degrees, points):
+        return [(symmetry_error(mesh, points, c, np.cos(t) * a + np.sin(t) * b), t) for t in np.radians(degrees)]
+
+    coarse_err, t = min(scan(np.arange(0, 180, step), few))
+    if coarse_err >= SYMMETRY_GAIN * symmetry_error(mesh, few, c, axes[:, best]):
+        return axes[:, best], errs[best]
+    err, t = min(scan(np.degrees(t) + np.arange(1 - step, step), samples))
+    return np.cos(t) * a + np.sin(t) * b, err
+
+
 def find_frames(V, F, n_samples=1500, refine=True, candidates=NOSE_CANDIDATES):
     """Face frames of a cleaned mesh in metres (V (n,3), F (f,3)), one per nose-tip candidate
     (the ``candidates`` sharpest wedges of the profile, sharpest first). Raises MeshError when
@@ -186,10 +218,8 @@ def find_frames(V, F, n_samples=1500, refine=True, candidates=NOSE_CANDIDATES):
     The sharpest wedge is not always the nose: a bust's base, a crown's rim or a cut-off
     shoulder can be sharper, so ``align_to_template`` lets the template's face choose."""
     c, inertia = shell_inertia(V, F)
-    _, axes = np.linalg.eigh(inertia)
-    S = _samples(V, n_samples)
-    errs = [symmetry_error(V, F, S, c, axes[:, k]) for k in range(3)]
-    n_sym = axes[:, int(np.argmin(errs))]
+    moments, axes = np.linalg.eigh(inertia)
+    n_sym, err = symmetry_normal(TriangleLocator(V, F), _samples(V, n_samples), c, moments, axes)
 
     chains = plane_sections(V, F, c, n_sym)
     if not chains:
@@ -212,7 +242,7 @@ def find_frames(V, F, n_samples=1500, refine=True, candidates=NOSE_CANDIDATES):
                         f"degrees (a nose tip: under {MAX_NOSE_ANGLE_DEG} degrees); the mesh does not look like a face")
     tips = [p for p, a in cands if a <= np.radians(MAX_NOSE_ANGLE_DEG)][:candidates]
     cen, area = V[F].mean(1), triangle_areas(V, F)
-    return [_face_frame(V, F, c, n_sym, min(errs), tip, refine, n_samples, cen, area) for tip in tips]
+    return [_face_frame(V, F, c, n_sym, err, tip, refine, n_samples, cen, area) for tip in tips]
 
 
 def find_frame(V, F, n_samples=1500, refine=True):
@@ -256,9 +286,10 @@ def rigid_icp(P, V, F, R, t, iters=20, trim=2.5, weights=None, scale=False):
     Returns R, t, median distance (m)."""
     med = np.inf
     weights = np.ones(len(P)) if weights is None else weights
+    mesh = TriangleLocator(V, F)
     for _ in range(iters):
         Q = P @ R.T + t
-        tri, w, d = closest_points(Q, V, F)
+        tri, w, d = mesh.closest(Q)
         med = float(np.median(d))
         keep = d <= trim * med + 1e-9
         C = barycentric_points(V, F, tri, w)
