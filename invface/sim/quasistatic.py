@@ -15,7 +15,7 @@ are fixed at set-up; Psi's volume barrier makes E infinite for an inverted tet).
 
 Each Newton step solves with the exact Hessian first: near equilibrium it converges in far
 fewer steps than a matrix projected to PSD. When the factorisation fails or the step is not
-a descent direction, it climbs a ladder of altered matrices (``Simulator._ladder``): with
+a descent direction, it climbs a ladder of altered matrices (``sim.ladder.NewtonLadder``): with
 contacts, the exact Hessian with the acting contacts' 12x12 Hessians projected to PSD (every
 contact's Hessian is indefinite: its plane turns with the triangle), then that matrix with a
 Levenberg-Marquardt shift of its diagonal, then the per-element definiteness-projected
@@ -49,8 +49,9 @@ from . import linsolve
 from .contact import MIN_CONTACT_RADIUS, ContactSet, default_contacts
 from .fem import Elements, FleshModel, Pattern
 from .materials import Material
+from .ladder import NewtonLadder
 from .tracks import Tracks
-
+from .warmstart import WarmStarts
 
 @dataclass
 class SimResult:
@@ -133,7 +134,6 @@ class SimResult:
                 f"{self.inverted} inverted tets (min volume ratio {self.min_J:.3f}), "
                 f"{sum(self.seconds.values()):.2f} s")
 
-
 def _check_manifold(tets):
     _, use = face_use(tets)
     if np.any(use > 2):
@@ -143,20 +143,17 @@ def _check_manifold(tets):
         raise MeshError("the flesh tet mesh has duplicated tets")
 
 
-class Simulator:
+class Simulator(NewtonLadder, WarmStarts):
     """Quasistatic muscle simulation of a FaceModel's flesh.
 
     material: Material constants; contact: include the face's contacts (``contact.default_contacts``:
     lips, lids and bone, eyeballs); contact_stiffness (N/m; default 50 x shear modulus x mean
     edge length); solver: 'pardiso' | 'superlu' | None; contacts: more contact models
     (``contact.ContactModel``), added to the face's. ``self.contacts`` is their ContactSet, or
-    None when there are none.
+    None when there are none. Its parts: the Newton loop with load stepping here, the Newton
+    step's fallback ladder (``ladder.NewtonLadder``) and the start states
+    (``warmstart.WarmStarts``).
     """
-    SHIFTS = (1e-3, 1e-2)       # Levenberg-Marquardt shifts of the exact Hessian (no contacts): smaller
-    #                             ones do not factor where the exact Hessian fails, larger ones damp every
-    #                             direction (bench/cold_solves.py measures them)
-    CONTACT_SHIFTS = (1e-2,)    # ... of the contact-projected one: a smaller shift first only adds
-    #                             failed factorisations
 
     def __init__(self, model, material: Material | None = None, contact=True,
                  contact_stiffness=None, solver=None, contacts=()):
@@ -384,78 +381,6 @@ class Simulator:
     MIN_STEP = 64           # the smallest load step is 1/64 of the path from start to target
     STALL = 40              # Newton is stalled after this many iterations without halving the residual in 5
 
-    def _start(self, X, jaw_from, jaw_to):
-        """Start state for jaw parameters jaw_to from a state X at jaw_from: the jaw-skinned
-        displacement added, constrained vertices exactly placed.
-
-        Next to a tet the state has crushed against the volume barrier the skinned guess can
-        invert it (a start outside the energy's domain). The free vertices of such a tet are
-        moved rigidly with the jaw instead when it has jaw-fixed vertices, else kept where
-        they are, until no tet is inverted (at most 20 passes)."""
-        d = self.model.skinned_volume(jaw_to) - self.model.skinned_volume(jaw_from)
-        fixed = self.dof_of_vertex < 0
-        d[fixed] = self.constrained_positions(jaw_to)[fixed] - X[fixed]
-        step = self.model.jaw_matrix(jaw_to) @ np.linalg.inv(self.model.jaw_matrix(jaw_from))
-        rigid = X @ step[:3, :3].T + step[:3, 3] - X
-        on_jaw = np.zeros(len(X), bool)
-        on_jaw[self.model.fixed_jaw] = True
-        tets = self.elements.tets
-        for _ in range(20):
-            start = X + d
-            bad = tets[self.elements.volumes(start) <= 0]
-            if not len(bad):
-                break
-            jawed = np.repeat(on_jaw[bad].any(1), 4)
-            v = bad.ravel()
-            keep = ~fixed[v]
-            d[v[keep & jawed]] = rigid[v[keep & jawed]]
-            d[v[keep & ~jawed]] = 0.0
-        return start
-
-    def _tangent_start(self, X, H, here, there, secs, eps=1e-3):
-        """Start state (N,3) for the inputs ``there`` = (activations, jaw, Tracks or None) from
-        an equilibrium X at the inputs ``here``, with H the exact Newton matrix data at X: the
-        Euler predictor of continuation methods, X^U + dX^U/dt along the straight path between
-        the inputs (dX^U/dt = -H^-1 dr/dt, dr/dt by a difference of the residual over ``eps``
-        of the path), the constrained vertices placed exactly. None when H is not positive
-        definite or the residual is not finite."""
-        (a, j, tr), (a1, j1, tr1) = here, there
-        je = j + eps * (j1 - j)
-        fixed = self.dof_of_vertex < 0
-        Xe = X.copy()
-        Xe[fixed] = self.constrained_positions(je)[fixed]
-        tre = None if tr is None else Tracks(tr.vertices, tr.targets + eps * (tr1.targets - tr.targets),
-                                             tr1.stiffness)
-        t = time.perf_counter()
-        _, g0, _ = self._total(X, a, self.model.jaw_matrix(j), tr, 1)
-        _, ge, _ = self._total(Xe, a + eps * (a1 - a), self.model.jaw_matrix(je), tre, 1)
-        secs["assembly"] += time.perf_counter() - t
-        if g0 is None or ge is None or not np.all(np.isfinite(ge - g0)):
-            return None
-        t = time.perf_counter()
-        try:
-            self._factor(H)
-        except linsolve.NotSPD:
-            return None
-        finally:
-            secs["factor"] += time.perf_counter() - t
-        t = time.perf_counter()
-        dU = -self._solver.solve((ge - g0) / eps)
-        secs["solve"] += time.perf_counter() - t
-        out = X.copy()
-        out[fixed] = self.constrained_positions(j1)[fixed]
-        out[self.free] += dU.reshape(-1, 3)
-        return out
-
-    def _better_start(self, a, b, act, jaw, tracks):
-        """Of two start states (b may be None), the one of lower total energy (an inverted
-        one's is infinite): the nearer the target's minimum, the fewer Newton steps."""
-        if b is None:
-            return a
-        jm = self.model.jaw_matrix(jaw)
-        Ea, Eb = (self._total(x, act, jm, tracks, 0)[0] for x in (a, b))
-        return b if Eb < Ea or not np.isfinite(Ea) else a
-
     def _newton(self, X, act, jaw, tracks, rtol, max_iter, progress, secs):
         """Newton from X: (X, converged, iterations, relative residuals, energy, matrix data).
 
@@ -490,156 +415,6 @@ class Simulator:
             secs["line_search"] += time.perf_counter() - t
         return X, converged, it, residuals, E, data
 
-    def _ladder(self):
-        """Newton matrices in the order the fallback tries them, least altered first: (kind,
-        Levenberg-Marquardt shift mu) with kind 'exact', 'contacts' (the acting contacts'
-        Hessians projected to PSD, the flesh's exact) or 'projected' (every element's)."""
-        if self.contacts is None:
-            shifts = [("exact", mu) for mu in self.SHIFTS]
-        else:
-            shifts = [("contacts", 0.0)] + [("contacts", mu) for mu in self.CONTACT_SHIFTS]
-        return [("exact", 0.0)] + shifts + [("projected", 0.0)]
-
-    CG_GATE = 1e-2              # see _newton_step
-    EXACT_BELOW = 1e-1          # with contacts, the exact Hessian only below this relative residual
-    CG_RTOL, CG_ITER = 1e-2, 8   # Newton steps by conjugate gradients on a held factorisation: see _newton_step
-
-    def _newton_step(self, X, act, jm, tracks, data, g, secs, memory):
-        """Newton direction for the exact Hessian data (nnz,) and gradient g (n,).
-
-        First, while the solver holds this Newton run's factorisation of an earlier step's
-        exact Hessian (``memory[1]``, that Hessian's data; ``_exact_factor`` still the latest
-        factorisation) and this Hessian is within CG_GATE of it (|H - H_held| <= CG_GATE
-        |H_held| over the upper triangle's entries): conjugate gradients on the exact Hessian preconditioned
-        with it, to |H dx + g| <= eta |g| with the forcing term eta = min(CG_RTOL, the
-        relative residual), in at most CG_ITER iterations, a back-substitution and a product
-        with H each (an inexact Newton step: a factorisation costs many such iterations, the
-        more the larger the mesh). Beyond the gate contacts have switched and the tries mostly
-        fail, so they are not made. Else, or when
-        they do not converge or meet non-positive curvature: the first matrix of ``_ladder``
-        that factors and gives a descent direction, starting one rung below the one that
-        worked last step (``memory[0]``), and with contacts never at the exact Hessian while
-        the relative residual is above EXACT_BELOW: far from equilibrium, while contacts
-        switch, the exact Hessian is often not positive definite, and PARDISO finds that out
-        only near the end of a factorisation. Nor, with contacts, where its submatrix around
-        the acting contacts is not positive
-        definite (``_contact_region_indefinite``: a proof that its factorisation would fail). A
-        shifted matrix is M + mu diag|H| with H the exact Hessian. When none works (a singular
-        projected matrix), a scaled gradient step."""
-        diag = self.pattern.diag_slot
-        relative = float(np.linalg.norm(g)) / (self.force_scale * np.sqrt(len(g)))
-        dx = self._held_factor_step(data, g, relative, secs, memory)
-        if dx is not None:
-            return dx
-        base = {"exact": data}
-
-        def matrix(kind):
-            if kind not in base:
-                t = time.perf_counter()
-                if kind == "contacts":
-                    base[kind] = data + self._contact_projection(X, jm)
-                else:
-                    base[kind] = self._total(X, act, jm, tracks, 2, project=True)[2]
-                secs["assembly"] += time.perf_counter() - t
-            return base[kind]
-
-        ladder = self._ladder()
-        first = max(memory[0] - 1, 0)
-        if self.contacts is not None and relative > self.EXACT_BELOW:
-            first = max(first, 1)                   # far from equilibrium: not the exact Hessian
-        for rung in range(first, len(ladder)):
-            kind, mu = ladder[rung]
-            values = matrix(kind)
-            if mu:
-                values = values.copy()
-                values[diag] += mu * np.abs(data[diag])
-            if kind == "exact" and self.contacts is not None:
-                t = time.perf_counter()
-                indefinite = self._contact_region_indefinite(X, jm, values)
-                secs["factor"] += time.perf_counter() - t
-                if indefinite:
-                    continue
-            dx = self._factored_direction(values, g, secs)
-            if dx is not None:
-                memory[0] = rung
-                if rung == 0:
-                    self._exact_factor, memory[1] = self._factorisations, data
-                return dx
-        memory[0] = len(ladder)
-        return -g / (np.abs(base["projected"][diag]).max() + 1e-30)
-
-    def _held_factor_step(self, data, g, relative, secs, memory):
-        """``_newton_step``'s inexact step: conjugate gradients on the exact Hessian (data
-        (nnz,)) preconditioned with the held factorisation, to the forcing term min(CG_RTOL,
-        ``relative``), when that factorisation is the solver's latest and its Hessian
-        (``memory[1]``) is within CG_GATE of this one; None when not tried, not converged or
-        not a descent direction."""
-        if not (memory[1] is not None and self._exact_factor == self._factorisations and (
-                np.linalg.norm(data - memory[1]) <= self.CG_GATE * np.linalg.norm(memory[1]))):
-            return None
-        t = time.perf_counter()
-        dx = linsolve.preconditioned_cg(self.pattern.matvec(data), self._solver.solve, -g,
-                                        rtol=min(self.CG_RTOL, relative), max_iter=self.CG_ITER)
-        secs["solve"] += time.perf_counter() - t
-        return dx if dx is not None and dx @ g < 0 else None
-
-    def _factored_direction(self, values, g, secs):
-        """-M^-1 g with M (data ``values``) factored; None when M is not positive definite or
-        the direction does not descend."""
-        t = time.perf_counter()
-        try:
-            self._factor(values)
-        except linsolve.NotSPD:
-            secs["factor"] += time.perf_counter() - t
-            return None
-        secs["factor"] += time.perf_counter() - t
-        t = time.perf_counter()
-        dx = -self._solver.solve(g)
-        secs["solve"] += time.perf_counter() - t
-        return dx if dx @ g < 0 else None
-
-    CONTACT_RINGS = 4           # see _contact_region_indefinite
-    REGION_FRACTION = 0.1       # ... and the largest region, as a fraction of the DOFs, it tests
-
-    def _contact_region_indefinite(self, X, jm, values):
-        """True when the Newton matrix data (nnz,) restricted to the flesh vertices of the
-        contacts acting at X (N,3) (jaw transform jm (4,4)), grown by CONTACT_RINGS rings of
-        tet neighbours, is not positive definite. It is a principal submatrix, so then neither
-        is the whole matrix, and factorising that would fail: the ladder skips the exact
-        Hessian without paying for it. Where contacts switch, their unprojected Hessians are
-        what makes the exact Hessian indefinite, near them. The test pays where the region is
-        a small part of a large mesh; regions over REGION_FRACTION of the DOFs are not tested
-        (False): there a test costs a good part of the factorisation it would spare."""
-        verts = self.contacts.acting_vertices(X, jm)
-        if len(verts) == 0:
-            return False
-        region = np.zeros(self.N)
-        region[verts] = 1.0
-        for _ in range(self.CONTACT_RINGS):
-            region = self.adjacency @ region
-        dof = self.dof_of_vertex[region > 0]
-        dof = dof[dof >= 0]
-        if 3 * len(dof) > self.REGION_FRACTION * self.pattern.n:
-            return False
-        idx = (3 * dof[:, None] + np.arange(3)).ravel()          # ascending: rows <= columns stay so
-        S = self.pattern.matrix(values)[idx][:, idx]               # the submatrix's upper triangle
-        pattern = linsolve.MatrixPattern(S)
-        try:
-            linsolve.make_solver(pattern, self._solver_name).factor(pattern.values(S))
-        except linsolve.NotSPD:
-            return True
-        return False
-
-    def _factor(self, values):
-        """Factorise Newton matrix data (nnz,) into ``_solver`` (raises linsolve.NotSPD)."""
-        self._factorisations += 1
-        self._solver.factor(values)
-
-    def _contact_projection(self, X, jm):
-        """Newton matrix data (nnz,) to add to the exact matrix to project each acting
-        contact's Hessian to PSD (the flesh's terms stay exact)."""
-        return self.pattern.assemble(None, self.contacts.projection_blocks(X, jm))
-
     def _line_search(self, X, dx, E, g, act, jm, tracks):
         """Backtracking Armijo on the energy (infinite for an inverted tet, so a step that
         inverts one is refused); near convergence, where the energy decrease is below its
@@ -672,12 +447,10 @@ class Simulator:
         """Render-surface vertices (V,3) of a SimResult through the model's embedding."""
         return self.model.embedded_surface(result.X)
 
-
 def _closer(a, b):
     """Whether Newton outcome a ended nearer equilibrium than b (an inverted start, with no
     residual, is the farthest)."""
     return bool(a[3]) and (not b[3] or a[3][-1] < b[3][-1])
-
 
 def _scalar(value, name):
     try:
@@ -685,11 +458,9 @@ def _scalar(value, name):
     except (TypeError, ValueError):
         raise InvfaceError(f"activation of {name} must be a number, got {value!r}") from None
 
-
 def _same_tracks(a, b):
     """Whether two Tracks (or None) act on the same vertices."""
     return a is not None and b is not None and np.array_equal(a.vertices, b.vertices)
-
 
 def _jaw_vector(jaw):
     if jaw is None:
