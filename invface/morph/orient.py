@@ -189,8 +189,8 @@ def symmetry_normal(mesh, samples, c, moments, axes, step=SYMMETRY_STEP_DEG):
     """The normal (3,) of the left/right symmetry plane through ``c`` and its reflection error
     (m) of ``samples`` onto the mesh (a ``TriangleLocator``): the inertia axis (``axes`` (3, 3)
     columns, ``moments`` ascending) with the least error, as the paper takes it, unless a
-    direction in the plane of the two axes of nearest moments reflects the samples at least
-    SYMMETRY_GAIN nearer. A head about as deep as it is wide has two nearly equal moments,
+    direction in the plane of the two axes of nearest moments has a reflection error below
+    SYMMETRY_GAIN of that axis's. A head about as deep as it is wide has two nearly equal moments,
     and its axes in their plane are arbitrary: the inertia alone can tilt the plane off the
     nose. That plane is searched every ``step`` degrees on a few samples, then a degree apart
     around the best."""
