@@ -52,7 +52,7 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
     frame: {name, index, time, skipped, kinds: {kind: {curve_rms_px, flagged}}, failed, error}."""
     from ..fit.landmarks import LandmarkTracker
     kinds = model_kinds(kinds)
-    chain = _Chain(model, dict(starts or {}), {k: [] for k in kinds})
+    chain = _Chain(dict(starts or {}), {k: [] for k in kinds})
     rows = []
     single = len(clip) == 1
     with LandmarkTracker(options.get("face", 0)) as tracker:
@@ -119,8 +119,8 @@ class _Chain:
     """What carries from frame to frame: each kind's warm start (the last unflagged frame's fit
     or record) and the curve RMS of its unflagged frames (``flag_reason``'s history)."""
 
-    def __init__(self, model, starts, history):
-        self.model, self.starts, self.history = model, starts, history
+    def __init__(self, starts, history):
+        self.starts, self.history = starts, history
 
     def take(self, kind, rms, flagged, row, start):
         """Record a finished kind of a frame in its summary ``row``; an unflagged one starts the
