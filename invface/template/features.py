@@ -28,6 +28,15 @@ def curve_from_points(tree, pts, step=0.0005):
     return _dedupe(tree.query(dense)[1])
 
 
+# The jaw line, one side from the cheek to the chin's middle, points (m) on the skin: where the
+# landmark detector's lower face oval lies on a render of this head at rest, seen from the front
+# (``scripts/jaw_line.py``), so the model's curve and the detector's mean the same points. The
+# detector draws the sides on the silhouette and the chin a few millimetres above its lower edge.
+JAW_POINTS = np.array([(0.0685, -0.0173, 0.0228), (0.0639, -0.0367, 0.0245), (0.0573, -0.0517, 0.0353),
+                       (0.0475, -0.0585, 0.0642), (0.0377, -0.0630, 0.0854), (0.0289, -0.0669, 0.0981),
+                       (0.0201, -0.0712, 0.1023), (0.0114, -0.0736, 0.1037), (0.0, -0.0765, 0.1024)])
+
+
 def frontal_curve(tree, xy):
     """Vertex polyline through the skin points seen from the front at xy (m,2)."""
     xy = np.asarray(xy, float)
@@ -149,7 +158,6 @@ def _feature_curves(fine, V, L, profile):
     bridge = np.nonzero((np.arange(len(P)) >= tip) & (P[:, 1] <= V[L["nose_bridge"], 1] + 1e-9))[0]
     C["nose_bridge"] = profile[bridge[::-1]]
     C["nose_base"] = curve_from_points(tree, V[[L["alar_R"], L["subnasale"], L["alar_L"]]])
-    jaw_xy = [(0.068, -0.015), (0.062, -0.045), (0.048, -0.064), (0.026, -0.076), (0.0, -0.080)]
-    C["jaw_line"] = frontal_curve(tree, _mirror_xy(jaw_xy) + jaw_xy[::-1][1:])
+    C["jaw_line"] = curve_from_points(tree, np.concatenate([JAW_POINTS * [-1, 1, 1], JAW_POINTS[::-1][1:]]))
     C["profile"] = profile
     return C
