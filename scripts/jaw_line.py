@@ -27,7 +27,8 @@ NEAR_PX = 2.0
 
 
 def jaw_vertices(model, camera):
-    """Vertex ids (17,) of the skin under the detector's jaw points on a render of the model at rest."""
+    """(the model's surface at rest (V, 3) m, vertex ids (17,) of the skin under the detector's
+    jaw points on a front render of it)."""
     p = model.parameters({})
     X = model.surface_model("blendshape").surface(p)
     img, _ = render_plate(model, X, camera, studio_light(), skin_albedo(model), parts_x=model.parts_positions(p),
@@ -56,6 +57,7 @@ def main(resolution):
     side = (left + right) / 2
     side[-1, 0] = 0.0                                       # the chin's middle on the midline
     print("JAW_POINTS = [" + ", ".join(f"({x:.4f}, {y:.4f}, {z:.4f})" for x, y, z in side) + "]")
+
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -228,7 +228,7 @@ def test_the_jaw_line_is_where_the_detector_draws_it_and_the_head_comes_out_leve
     """A render of the built-in head at rest, from the front: the detector's lower face oval
     lies on the model's jaw_line (``template.features.JAW_POINTS``; 7.1 px RMS with the curve
     drawn by hand, which put the chin 3 mm low and the sides 7 mm inside the silhouette), and the
-    pose from the curves finds the head level (it tipped it 0.14 rad chin down to lay the one on
+    pose from the curves finds the head level (it turned it 0.14 rad chin up to lay the one on
     the other)."""
     from invface.fit.curves import fit_curves
     from invface.fit.landmarks import curves_from_landmarks, detect_face
