@@ -91,6 +91,18 @@ def truth_actor(out, seed, sd, template):
     return actor, info
 
 
+def truth_plate(out, truth, seed, detector=True):
+    """The path of the actor ``truth`` rendered at neutral, level, in OUT/plates; with
+    ``detector`` its curve file is set aside (PLATE.curves.truth), so the detector finds the
+    curves, as on a user's photo."""
+    path = write_plate(truth, out / "plates", f"face{seed:02d}", "blendshape", {"weights": {}, "jaw": None},
+                       (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), seed=seed)
+    if detector:
+        side = path.with_name(path.stem + ".curves.json")
+        side.rename(side.with_suffix(".truth"))
+    return path
+
+
 def one_face(out, seed, sd, template, curves_from):
     t0 = time.perf_counter()
     truth, info = truth_actor(out, seed, sd, template)
@@ -98,11 +110,8 @@ def one_face(out, seed, sd, template, curves_from):
     if truth is None:
         print(f"face {seed}: {info['build_error']}", flush=True)
         return {"seed": seed, **info}
-    path = write_plate(truth, out / "plates", f"face{seed:02d}", "blendshape", {"weights": {}, "jaw": None},
-                       (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), seed=seed)
+    path = truth_plate(out, truth, seed, detector=curves_from == "detector")
     side = path.with_name(path.stem + ".curves.json")
-    if curves_from == "detector":            # the detector, as on a user's photo: no curve file beside it
-        side = side.rename(side.with_suffix(".truth"))
     plate = load_plate(path)
     curves, _ = find_curves(template, plate, side if curves_from == "truth" else None)
     pose = pose_from_curves(template, plate, curves)

@@ -6,7 +6,7 @@ actors and rendered looking straight ahead, at rest, then posed by the built-in 
 
 1. Each face is an actor built from ICT-FaceKit's neutral plus its 20 identity shapes at
    coefficients ~ N(0, sd^2) (``identity_3d.truth_actor``, kept in OUT), rendered at neutral
-   with rotation 0, the gaze 0 and no expression (``fit.samples.write_plate``). The actor's
+   with rotation 0, the gaze 0 and no expression (``identity_3d.truth_plate``). The actor's
    frame is the template's (the builder aligns the scan to it), so the true pose is 0.
 2. The landmark detector finds the curves, as on a user's photo. ``pipeline.plates.
    pose_from_curves`` poses the built-in head (Eq. 15's pose pass, then its controls pass),
@@ -16,8 +16,9 @@ actors and rendered looking straight ahead, at rest, then posed by the built-in 
 
 Prints and writes, per face, the rotation (rad; x is the pitch, positive turning the face down)
 and the eyes' (yaw, pitch) (rad), all of which are 0 in truth, and the medians of their
-absolute values; ``sight_pitch`` is the eyes' line of sight in the camera's frame, the eye's pitch (positive up)
-less the head's: where the eyes look, whatever share of it the fit gives the head and the eyes.
+absolute values; ``sight_pitch`` is the eyes' line of sight in the camera's frame, the eye's
+pitch (positive up) less the head's: where the eyes look, whatever share of it the fit gives
+the head and the eyes.
 """
 from __future__ import annotations
 
@@ -29,10 +30,9 @@ from pathlib import Path
 
 import numpy as np
 from _common import SHARED, add_json_option, write_json
-from identity_3d import parse_range, truth_actor
+from identity_3d import parse_range, truth_actor, truth_plate
 
 import invface
-from invface.fit.samples import write_plate
 from invface.model.gaze import eye_angles
 from invface.pipeline.plates import find_curves, pose_from_curves
 from invface.render.plates import load_plate
@@ -49,11 +49,7 @@ def plate_of(out, seed, sd, template):
     truth, _ = truth_actor(out, seed, sd, template)
     if truth is None:
         return None
-    path = write_plate(truth, out / "plates", f"face{seed:02d}", "blendshape", {"weights": {}, "jaw": None},
-                       (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), seed=seed)
-    side = path.with_name(path.stem + ".curves.json")
-    side.rename(side.with_suffix(".truth"))              # the detector finds the curves, as on a photo
-    return path
+    return truth_plate(out, truth, seed)
 
 
 def posed(template, path, drop):

@@ -15,11 +15,11 @@ detector (``pip install -e .[landmarks]``).
 import argparse
 
 import numpy as np
-import trimesh
 
 import invface
 from invface.fit.landmarks import curves_from_landmarks, detect_face
 from invface.io.images import linear_to_srgb
+from invface.mesh.triangles import vertex_normals
 from invface.render.camera import Camera
 from invface.render.synthetic import render_plate, skin_albedo, studio_light
 
@@ -34,9 +34,8 @@ def jaw_vertices(model, camera):
     img, _ = render_plate(model, X, camera, studio_light(), skin_albedo(model), parts_x=model.parts_positions(p),
                           spp=16)
     pts, _ = detect_face(linear_to_srgb(img), name="template render")
-    n = trimesh.Trimesh(X, model.triangles, process=False).vertex_normals
-    eye = camera.R.T @ (-camera.t)
-    front = np.flatnonzero(np.einsum("ij,ij->i", n, eye - X) > 0)
+    n = vertex_normals(X, model.triangles)
+    front = np.flatnonzero(np.einsum("ij,ij->i", n, camera.center - X) > 0)
     uv = camera.project(X[front])[0]
     out = []
     for q in curves_from_landmarks(pts)["jaw_line"]:
