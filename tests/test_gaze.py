@@ -78,7 +78,7 @@ def test_gaze_jacobian_matches_finite_differences(small_expressive_model):
 
 def test_curve_fit_reads_the_gaze_from_the_irises(small_expressive_model):
     """A plate whose eyes look to the actor's left and up, set 4 % wider apart than the model's:
-    with the irises the curve fit turns both eyes that way (each pupil within 1 px of its iris,
+    with the irises the curve fit turns both eyes that way (each pupil within 1.1 px of its iris,
     taken from its eye's corners), not apart; without them the eyes stay nearly ahead."""
     m = small_expressive_model
     cam = Camera.front_view(720, 540)
@@ -97,7 +97,7 @@ def test_curve_fit_reads_the_gaze_from_the_irises(small_expressive_model):
     with_irises = fit_curves(m, cam, {**curves, **irises}, rotation=ROT, translation=TR, solve_pose=False)
     without = fit_curves(m, cam, curves, rotation=ROT, translation=TR, solve_pose=False)
     a_with, a_without, truth = (Eyes(m).angles(q) for q in (with_irises.p, without.p, p))
-    assert max(v[0] for v in with_irises.iris_px.values()) < 1.0
+    assert max(v[0] for v in with_irises.iris_px.values()) < 1.1
     assert without.iris_px == {}
     assert np.abs(a_with - truth).max() < 0.06, (a_with, truth)
     assert np.abs(a_without - truth).max() > 0.15
@@ -108,7 +108,7 @@ def test_shut_and_half_shut_eyes_are_fitted_from_their_lids(small_expressive_mod
     """Issue 61 item 4: plate lids drawn from the model with both eyes shut, half shut with the
     left squinting, or open (0.3 px of noise): the curve fit (lambda_1 scaled with the face,
     as the pipeline does) closes the eyes as far as the lids say: eyeBlink within 0.12 and the
-    lids within 1.5 px (with the lids' controls held by the full lambda_1 a shut eye was fitted
+    lids within 1.7 px (the prior leaves the squint of 0.4 out, and with the lids' controls held by the full lambda_1 a shut eye was fitted
     at 0.38, its lids 5.5 px off), and an open eye stays open."""
     from invface.pipeline.plates import curve_lambda
     m = small_expressive_model
@@ -124,4 +124,20 @@ def test_shut_and_half_shut_eyes_are_fitted_from_their_lids(small_expressive_mod
     for side in ("Left", "Right"):
         assert abs(got[f"eyeBlink{side}"] - blink) < 0.12, (side, got[f"eyeBlink{side}"], blink)
     eyes = [k for k in fit.residual_px if k.startswith("eye_")]
-    assert max(float(np.sqrt(np.mean(fit.residual_px[k] ** 2))) for k in eyes) < 1.5
+    assert max(float(np.sqrt(np.mean(fit.residual_px[k] ** 2))) for k in eyes) < 1.7
+
+
+def test_the_pupils_rest_above_the_eye_corners_as_on_real_faces(small_expressive_model):
+    """At rest, looking ahead, each pupil lies above its eye corners' line by 0.07-0.11 eye
+    widths seen from the front, where the detector puts real people's irises between its eye
+    corners (bench/eye_rest.py); with the pupil on that line a forward look was fitted as
+    looking up."""
+    m = small_expressive_model
+    p = m.parameters({})
+    pupils, _ = Eyes(m).pupils(p)
+    for e, s in enumerate("LR"):
+        lid = m.neutral[np.asarray(m.curves[f"eye_{s}_upper"])][[0, -1]]
+        width = np.linalg.norm(lid[1, :2] - lid[0, :2])
+        u = (lid[1, :2] - lid[0, :2]) / width
+        above = (pupils[e, :2] - lid.mean(0)[:2]) @ np.array([-u[1], u[0]]) * np.sign(u[0])
+        assert 0.07 < above / width < 0.11, (s, above / width)

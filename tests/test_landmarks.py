@@ -160,7 +160,8 @@ def test_a_small_face_in_a_wide_frame_is_found_on_a_crop(scale, at):
 @needs_detector
 def test_irises_and_peer_scores_on_renders_of_a_known_gaze(small_expressive_model):
     """Renders of the built-in head: the detector's iris centres (iris_L / iris_R by the nearer
-    eye) land within 2.5 px of the model's pupils, and turn with them; its peer scores name
+    eye) land within 3 px of the model's pupils (it puts a rendered iris 1-2.5 px below the
+    pupil), and turn with them; its peer scores name
     sides as ARKit does, the actor's own (the actor's left eye shut: its squint rises on the left;
     both eyes turned to the actor's left: eyeLookOutLeft and eyeLookInRight rise)."""
     from invface.fit.landmarks import curves_from_landmarks, detect_face
@@ -181,7 +182,7 @@ def test_irises_and_peer_scores_on_renders_of_a_known_gaze(small_expressive_mode
         pupils = cam.project(Eyes(m).pupils(p)[0])[0]
         if label != "shut":
             for e, s in enumerate("LR"):
-                assert np.linalg.norm(curves[f"iris_{s}"].mean(0) - pupils[e]) < 2.5, (label, s)
+                assert np.linalg.norm(curves[f"iris_{s}"].mean(0) - pupils[e]) < 3.0, (label, s)
         seen[label] = (curves, scores)
     moved = seen["look"][0]["iris_L"].mean(0) - seen["rest"][0]["iris_L"].mean(0)
     assert moved[0] > 4.0                                          # to the image's right: the actor's left
@@ -245,3 +246,24 @@ def test_the_jaw_line_is_where_the_detector_draws_it_and_the_head_comes_out_leve
     jaw = fit.residual_px["jaw_line"]
     assert np.sqrt(np.mean(jaw ** 2)) < 2.5
     assert abs(fit.rotation[0]) < 0.05 and abs(fit.rotation[1]) < 0.05, fit.rotation
+
+
+@needs_detector
+@pytest.mark.skipif(not PHOTOS.is_dir(), reason="no real photos (../shared/data/real/photos)")
+def test_people_who_look_into_the_lens_are_fitted_looking_into_it():
+    """The five shared photos are portraits whose subjects look into the lens: the pose from
+    their curves and irises (Eq. 15 with the gaze) puts each line of sight within 0.1 rad of the
+    camera's axis in pitch. With the template's pupils on its eye corners' line every one was
+    fitted looking 0.17-0.22 rad up."""
+    import invface
+    from invface.model.gaze import eye_angles
+    from invface.pipeline.plates import find_curves, pose_from_curves
+    from invface.render.plates import load_plate
+    m = invface.template.build(resolution=1.0)
+    for path in sorted(PHOTOS.glob("*.jpg")):
+        plate = load_plate(path)
+        curves, _ = find_curves(m, plate, None)
+        pose = pose_from_curves(m, plate, curves)
+        eyes = eye_angles(m.blendshape_names, pose.p[:len(m.blendshape_names)])
+        sight = np.mean([eyes[s][1] for s in "LR"]) - pose.rotation[0]
+        assert abs(sight) < 0.1, (path.name, sight)

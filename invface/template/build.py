@@ -21,7 +21,8 @@ from .skull import skull_meshes
 from .shell import embed_fine, layer_radii, prism_tets
 from .surfaces import build_grids
 
-GENERATOR_VERSION = "6"     # 2: the inner parts; 3: the skull; 4: the ARKit shapes; 5: tongueOut; 6: the jaw line
+GENERATOR_VERSION = "7"     # 2: the inner parts; 3: the skull; 4: the ARKit shapes; 5: tongueOut; 6: the jaw line;
+                            # 7: the canthi under the pupils
 # Quality bounds every generated mesh must meet (checked at build time and in the tests).
 MIN_DIHEDRAL_DEG = 1.0
 MIN_RADIUS_RATIO = 0.005
