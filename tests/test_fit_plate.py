@@ -115,18 +115,20 @@ def test_huber_rows_make_the_huber_loss_and_bound_an_occluders_pull(small_expres
                                robust=robust, mask=_eyes_out(m, cam, plate))(z)[1][:len(p)] for pl in (occluded, plate)]
         grads[robust] = g2[0] - g2[1]
     # the gradient of the robust rows against central differences, away from the truth with
-    # a threshold low enough that many rows are linear (weights where interior shading rules)
+    # a threshold low enough that many rows are linear, on weights where interior shading rules
+    # (the brows: the mouth's controls move the lips' occlusion edges, whose visibility term the
+    # interior gradient leaves out)
     obj = ShadingObjective(m, m.surface_model("blendshape"), cam, plate, g, a, np.zeros(len(p)), spp=32,
                            silhouette_spp=4, robust=0.01)
     z6 = np.r_[p * 0.6, ROT, TR]
     grad = obj(z6)[1]
     r = obj._render(posed_surface(obj.sm, z6, obj.vec)[1])[2]
     assert (np.abs(r) > 0.01).mean() > 0.005                    # rows in the linear part
-    for name in ("mouthSmileLeft", "browInnerUp"):
+    for name in ("browDownLeft", "browInnerUp"):
         k = m.blendshape_names.index(name)
         d = np.zeros_like(z6)
         d[k] = 0.01
-        assert grad[k] == pytest.approx((obj(z6 + d)[0] - obj(z6 - d)[0]) / 0.02, rel=0.35), name
+        assert grad[k] == pytest.approx((obj(z6 + d)[0] - obj(z6 - d)[0]) / 0.02, rel=0.1), name
     assert np.linalg.norm(grads[0.1]) < 0.5 * np.linalg.norm(grads[None]), grads
 
 
