@@ -55,6 +55,7 @@ NECK_DROP = 0.02          # m: the neck start is this far below the chin on the 
 EDGE_DISTANCE = 0.001     # m: an outer landmark this close to the scan's open edge ...
 PRIOR_GAP = 0.01          # m: ... whose template prior lies this far off the scan is off the scan
 FALLBACK = "the template's landmark carried by the face similarity"
+NOTCH_PROMINENCE = 0.0005  # m: a notch of the profile (the stomion, the chin-lip fold) at least this deep
 OPENING_WIDTH = 0.6       # an opening narrower than this share of the carried corners' span is not
                           # the eye or the mouth (a scanner's hole), and gives no corners
 
@@ -270,6 +271,8 @@ def find_landmarks(V, F, model):
         L[name] = _register_patch(model, model.landmarks[name], V, F, A, t + shift)
     corners("mouth_corner_L", "mouth_corner_R", "stomion", "stomion")
     search.mouth(chin)
+    if "stomion" not in fell:       # the corners again, from the stomion found on the profile
+        corners("mouth_corner_L", "mouth_corner_R", "stomion", "stomion")
     search.neck_and_top(chin)
     search.head_sides()
     outer = _off_scan(V, F, L, gap)
@@ -359,9 +362,11 @@ class _ProfileSearch:
         return chin
 
     def mouth(self, chin):
-        """The stomion (the deepest notch of the profile seen from the front, at the mouth
-        corners' height), the subnasale (the sharpest concave corner between it and the
-        nose tip) and the lips (the most forward points either side of the stomion)."""
+        """The stomion (the highest notch of the profile seen from the front near the mouth
+        corners' height, else its deepest point there: with the corners placed low the window
+        reaches the chin-lip fold, a deeper notch below the lower lip), the subnasale (the
+        sharpest concave corner between it and the nose tip) and the lips (the most forward
+        points either side of the stomion)."""
         P, idx, L, tip = self.P, self.idx, self.L, self.tip
         y, z = P[:, 1], P[:, 2]
         my = 0.5 * (L["mouth_corner_L"][1] + L["mouth_corner_R"][1])
@@ -370,7 +375,10 @@ class _ProfileSearch:
             # each candidate's depth is the frontmost profile point at its height, so an open
             # mouth's inner lips do not count
             front = _front_depth(P[chin:tip + 1], y[mouth])
-            stom = idx[mouth][np.argmin(front)]
+            cand = idx[mouth]
+            up = np.argsort(y[cand])                   # bottom to top
+            notches, _ = find_peaks(-front[up], prominence=NOTCH_PROMINENCE)
+            stom = cand[up[notches[-1]]] if len(notches) else cand[np.argmin(front)]
             L["stomion"] = P[stom]
         else:
             stom = self.fallback("stomion", L["stomion"],
