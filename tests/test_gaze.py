@@ -108,8 +108,9 @@ def test_shut_and_half_shut_eyes_are_fitted_from_their_lids(small_expressive_mod
     """Issue 61 item 4: plate lids drawn from the model with both eyes shut, half shut with the
     left squinting, or open (0.3 px of noise): the curve fit (lambda_1 scaled with the face,
     as the pipeline does) closes the eyes as far as the lids say: eyeBlink within 0.12 and the
-    lids within 1.7 px (the prior leaves the squint of 0.4 out, and with the lids' controls held by the full lambda_1 a shut eye was fitted
-    at 0.38, its lids 5.5 px off), and an open eye stays open."""
+    lids within 1.7 px (the prior leaves the squint of 0.4 out; with the lids' controls held by
+    the full lambda_1 a shut eye was fitted at 0.38, its lids 5.5 px off), and an open eye stays
+    open."""
     from invface.pipeline.plates import curve_lambda
     m = small_expressive_model
     cam = Camera.front_view(720, 540)
