@@ -102,11 +102,11 @@ def main():
     rows = []
     scratch = tempfile.TemporaryDirectory()
     for name, split, plate in plates(a.photos, a.clip, a.every, scratch.name):
-        points, scores = detect_face(linear_to_srgb(plate.image), name=name)
-        curves, _ = find_curves(model, plate, None)
+        curves, _ = find_curves(model, plate, None)           # the detector; its scores in plate.peer_arkit
+        scores = plate.peer_arkit
         pose = pose_from_curves(model, plate, curves)
         eyes = eye_angles(model.blendshape_names, pose.p[:len(model.blendshape_names)])
-        r = {"plate": name, "split": split, "height": height(curves_from_landmarks(points)),
+        r = {"plate": name, "split": split, "height": height(curves),
              "head_pitch": float(-pose.rotation[0]), "eye_pitch": float(np.mean([eyes[s][1] for s in "LR"])),
              "curve_rms_px": float(pose.rms_px),
              "mediapipe_look_up": float(np.mean([scores.get(f"eyeLookUp{s}", 0.0) for s in ("Left", "Right")])),
