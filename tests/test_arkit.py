@@ -6,8 +6,8 @@ import pytest
 
 from invface.errors import ControlsError
 from invface.model import FitVector
-from invface.model.arkit import (ARKIT_NAMES, LEGACY, arkit_name, arkit_values, drives, translate,
-                                 unsupported)
+from invface.model.arkit import (ARKIT_NAMES, LEGACY, OPPOSITES, arkit_name, arkit_values, drives,
+                                 opposite_pairs, translate, unsupported)
 from invface.model.rig import JAW_UPPER
 
 
@@ -25,6 +25,45 @@ def test_names_are_read_in_every_style():
     assert arkit_name("browDown") is None and drives("browDown") == ("browDownLeft", "browDownRight")
     assert arkit_name("lipsPart") is None and drives("lipsPart") == ()
     assert drives("jawOpen") == ()          # ARKit's jawOpen reads the jaw bone, not a shape
+
+
+def test_opposite_controls_are_paired_in_every_naming_style():
+    """The prior's opposite pairs (eye up / down, blink / wide, smile / frown, ...) are found by
+    ARKit, ICT-style and FACS-style names; one legacy control can sit in two pairs."""
+    assert all(a in ARKIT_NAMES and b in ARKIT_NAMES for a, b in OPPOSITES)
+    arkit = [n for n in ARKIT_NAMES if not n.startswith("jaw")]
+    found = {(arkit[i], arkit[j]) for i, j in opposite_pairs(arkit)}
+    assert found == set(OPPOSITES)
+    ict = ["eyeLookUp_L", "eyeLookDown_L", "eyeLookUp_R", "mouthSmile_R", "mouthFrown_R", "mouthLeft"]
+    assert {(ict[i], ict[j]) for i, j in opposite_pairs(ict)} == {("eyeLookUp_L", "eyeLookDown_L"),
+                                                                  ("mouthSmile_R", "mouthFrown_R")}
+    legacy = ["browDown", "browOuterUp_L", "browOuterUp_R", "eyeBlink_L"]
+    assert {(legacy[i], legacy[j]) for i, j in opposite_pairs(legacy)} == {("browDown", "browOuterUp_L"),
+                                                                          ("browDown", "browOuterUp_R")}
+
+
+def test_the_prior_charges_a_pair_set_together_and_not_one_alone():
+    """A face makes one control of an opposite pair at a time: the pair's rows are 0 with one
+    set, between the smaller weight and twice it with both (in the prior's units), and their
+    Jacobian matches finite differences."""
+    from invface.fit.priors import OPPOSITE_PRIOR, opposite_rows, regulariser
+    vec = FitVector([n for n in ARKIT_NAMES if not n.startswith("jaw")])
+    up, down = vec.blendshape_names.index("eyeLookUpLeft"), vec.blendshape_names.index("eyeLookDownLeft")
+    z = np.zeros(vec.size)
+    z[up] = 0.8
+    assert np.allclose(opposite_rows(z, vec, 1.0)[0], 0)
+    z[down] = 0.3
+    r = opposite_rows(z, vec, 1.0)[0] / np.sqrt(OPPOSITE_PRIOR)
+    assert np.count_nonzero(r) == 1 and 0.3 < r.max() < 2 * 0.3
+    z = np.random.default_rng(3).uniform(0, 1, vec.size)
+    r, J = regulariser(z, vec, 400.0, relief=np.full(vec.P, 0.02))
+    assert len(r) == vec.P + len(OPPOSITES)
+    for k in range(vec.K):
+        e = np.zeros(vec.size)
+        e[k] = 1e-6
+        fd = (regulariser(z + e, vec, 400.0, relief=np.full(vec.P, 0.02))[0]
+              - regulariser(z - e, vec, 400.0, relief=np.full(vec.P, 0.02))[0]) / 2e-6
+        assert np.allclose(fd, J[:, k], atol=1e-6), vec.blendshape_names[k]
 
 
 def test_values_of_the_built_in_heads_controls_and_jaw(small_expressive_model):

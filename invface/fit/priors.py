@@ -26,6 +26,15 @@ LID_PRIOR = 0.1
 LID_CONTROLS = ("eyeBlink",)
 
 
+# The opposite pairs' (``arkit.OPPOSITES``) weight, as a share of the prior's lambda: a pair set
+# to w each costs what one control at 2 w does under the full prior, whatever relief the pair
+# has (the eyeLook controls' GAZE_PRIOR). Tuned on the tuned half of the real photos, where a
+# share of 1 left mouthLeft and mouthRight set together (bench/history/2026-12.md).
+OPPOSITE_PRIOR = 4.0
+# keeps the pair rows smooth at (0, 0), in weight units
+OPPOSITE_EPS = 0.01
+
+
 def gaze_relief(vec, irises=True, lids=()):
     """(P,) factors on the controls' prior: GAZE_PRIOR on the eyeLook weights (with
     ``irises``), LID_PRIOR on the LID_CONTROLS of the sides in ``lids`` ("Left", "Right": the
@@ -78,12 +87,33 @@ def prior_units(vec):
     return u
 
 
-def regulariser(z, vec, lam, center=None, relief=None):
-    """Rows sqrt(lam) (p - center) / units (P,) and their Jacobian (P, vec.size): the lambda |w|^2
-    terms of Eq. 13 and 15 and Eq. 16's lambda_2 |w - w^|^2 (center: default 0), each control in
-    its ``prior_units``; ``relief`` (P,): factors on lam per control (``gaze_relief``)."""
+def opposite_rows(z, vec, lam):
+    """Rows sqrt(lam OPPOSITE_PRIOR) h(w_a, w_b) (n,), one per opposite pair of the model's
+    blendshapes (``vec.opposites``), and their Jacobian (n, vec.size). h = 2 a b / (a + b + eps),
+    the pair's harmonic mean: w at a = b = w, about 2 min(a, b) where one dominates, 0 where
+    either is; smooth, where min(a, b) is not. A face makes one control of a pair at a time, so
+    the part they share is charged."""
+    z = np.asarray(z, float)
+    i, j = vec.opposites.T
+    a, b = np.maximum(z[i], 0.0), np.maximum(z[j], 0.0)
+    d = a + b + OPPOSITE_EPS
+    s = np.sqrt(lam * OPPOSITE_PRIOR)
+    J = np.zeros((len(i), vec.size))
+    rows = np.arange(len(i))
+    J[rows, i] = s * 2 * b * (b + OPPOSITE_EPS) / d ** 2
+    J[rows, j] = s * 2 * a * (a + OPPOSITE_EPS) / d ** 2
+    return s * 2 * a * b / d, J
+
+
+def regulariser(z, vec, lam, center=None, relief=None, lam_opposite=None):
+    """Rows and their Jacobian (n, vec.size) of the weights' prior: first sqrt(lam) (p - center)
+    / units (P,), the lambda |w|^2 terms of Eq. 13 and 15 and Eq. 16's lambda_2 |w - w^|^2
+    (center: default 0), each control in its ``prior_units``, ``relief`` (P,) factors on lam per
+    control (``gaze_relief``); then the opposite pairs' rows (``opposite_rows``) at
+    ``lam_opposite`` (default lam), n = P + len(vec.opposites)."""
     c = 0 if center is None else center
     s = np.sqrt(lam * (1.0 if relief is None else np.asarray(relief, float))) / prior_units(vec)
     J = np.zeros((vec.P, vec.size))
     J[:, vec.controls] = np.diag(np.broadcast_to(s, (vec.P,)))
-    return s * (np.asarray(z, float)[vec.controls] - c), J
+    ro, Jo = opposite_rows(z, vec, lam if lam_opposite is None else lam_opposite)
+    return np.concatenate([s * (np.asarray(z, float)[vec.controls] - c), ro]), np.vstack([J, Jo])

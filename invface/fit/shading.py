@@ -57,7 +57,7 @@ from ..render.backplate import background_plate, head_silhouette
 from ..render.jacobian import RasterJacobian
 from ..render.renderer import FaceRenderer
 from .curves import CurveObjective
-from .lambdas import EQ16_LAMBDA_1, EQ16_LAMBDA_2
+from .lambdas import EQ15_LAMBDA_1, EQ16_LAMBDA_1, EQ16_LAMBDA_2
 from ..model.pose import posed_jacobian, posed_parts, posed_surface
 from .priors import prior_rows, regulariser, sparsity_slopes, temporal_prior
 
@@ -182,13 +182,15 @@ class ShadingObjective:
     pyramid's levels; image_weight: the image rows' weight (a coarse stage's, ``fit_shading``);
     curve_camera: the camera of the curve term's pixels (default ``camera``); jacobian:
     'analytic' or 'forward' (``image_jacobian``; default the module's JACOBIAN, which benches
-    set to compare the two); jacobian_samples: the analytic Jacobian's rays per pixel and axis."""
+    set to compare the two); jacobian_samples: the analytic Jacobian's rays per pixel and axis;
+    lam_opposite: the opposite pairs' weight (``priors.opposite_rows``; default lam1 times Eq.
+    15's unscaled lambda_1)."""
 
     def __init__(self, model, surface_model, camera, plate, gamma, albedo, p_hat, curves=None,
                  lam1=EQ16_LAMBDA_1, lam2=EQ16_LAMBDA_2, mask=None, spp=8, silhouette_spp=0.5, seed=1, window=None,
                  jacobian_spp=2, backplate=None, robust=ROBUST_DELTA, previous=None, temporal=0.0,
                  levels=LEVELS, image_weight=1.0, curve_camera=None, jacobian=None,
-                 jacobian_samples=JACOBIAN_SAMPLES):
+                 jacobian_samples=JACOBIAN_SAMPLES, lam_opposite=None):
         import drjit as dr
         self.dr = dr
         self.model, self.sm = model, surface_model
@@ -209,6 +211,10 @@ class ShadingObjective:
                                      seed=seed, backplate=plate if backplate is None else backplate, crop=window,
                                      parts=model.parts)
         self.p_hat, self.lam1, self.lam2 = np.asarray(p_hat, float), lam1, lam2
+        # the opposite pairs cost what they cost in Eq. 15, in Eq. 16's units (its curve rows
+        # weigh lam1 per px^2): at lam2 the image term, which sees the lids, set both controls of
+        # a pair that the curve stage had kept apart
+        self.lam_opposite = lam1 * EQ15_LAMBDA_1 if lam_opposite is None else lam_opposite
         self.jacobian_spp = int(jacobian_spp)
         jacobian = jacobian or JACOBIAN
         if jacobian not in ("hybrid", "analytic", "forward"):
@@ -223,9 +229,9 @@ class ShadingObjective:
         self.bridge = PosedSurfaceFunction(surface_model, self.vec)     # the gradient-only path's
 
     def _prior_rows(self, z):
-        """The prior's K+6 rows, then the temporal term's z-size rows in a sequence: (rows,
-        their Jacobian (n, z size)); both are linear in z."""
-        rows, jac = regulariser(z, self.vec, self.lam2, self.p_hat)
+        """The prior's rows (``priors.regulariser``: K+6, then the opposite pairs'), then the
+        temporal term's z-size rows in a sequence: (rows, their Jacobian (n, z size))."""
+        rows, jac = regulariser(z, self.vec, self.lam2, self.p_hat, lam_opposite=self.lam_opposite)
         if self.temporal is None:
             return rows, jac
         rt, Jt = prior_rows(z, self.temporal)
@@ -256,7 +262,7 @@ class ShadingObjective:
     def _cost(self, r_image, r_rest):
         """Eq. 16's value from the image rows and the prior, temporal and curve rows
         (``_prior_and_curves``); ``terms`` keeps its parts."""
-        P = self.vec.P
+        P = self.vec.P + len(self.vec.opposites)
         T = P if self.temporal is None else P + self.vec.size
         part = lambda r: 0.5 * float(r @ r)
         self.terms = {"image": part(r_image), "prior": part(r_rest[:P]), "curves": part(r_rest[T:])}
@@ -535,8 +541,8 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     their weight raised to the whole pyramid's), a quarter of the pixels to render and
     differentiate. radius: the dogleg's first trust radius in ``FitVector.scales()`` units.
     ``render`` options go to ``ShadingObjective`` (spp, silhouette_spp, seed, jacobian,
-    jacobian_samples, jacobian_spp, backplate: default the plate with the head filled in from its
-    surroundings). Returns a ShadingFit."""
+    jacobian_samples, jacobian_spp, lam_opposite, backplate: default the plate with the head
+    filled in from its surroundings). Returns a ShadingFit."""
     from .dogleg import dogleg, with_linear_term
     sm, vec = model.surface_model(kind), FitVector.of(model)
     z0 = vec.pack(p_hat if p0 is None else p0, rotation, translation)

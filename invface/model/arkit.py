@@ -76,6 +76,20 @@ LEGACY = {
 }
 
 
+# ARKit's opposite pairs: two controls that move the same tissue the opposite way along one
+# direction (the eye up or down, in or out; the upper lid down in a blink and up in a wide eye;
+# a mouth corner up in a smile and down in a frown; the outer brow down or up; the mouth to the
+# actor's left or right). A face makes one of each pair at a time, so the fits' prior charges
+# the smaller of the two (``fit.priors.opposite_rows``): with the eyeLook controls' prior
+# relieved the curve fit set eyeLookUp and eyeLookDown on one eye together, using both lid
+# shapes at once.
+OPPOSITES = tuple(
+    pair for side in ("Left", "Right") for pair in (
+        (f"eyeLookUp{side}", f"eyeLookDown{side}"), (f"eyeLookIn{side}", f"eyeLookOut{side}"),
+        (f"eyeBlink{side}", f"eyeWide{side}"), (f"mouthSmile{side}", f"mouthFrown{side}"),
+        (f"browDown{side}", f"browOuterUp{side}"))) + (("mouthLeft", "mouthRight"),)
+
+
 # old names with no ARKit twin, read on a model that lacks them as the controls that make the
 # same motion (lipsPart: the lower lip down and the upper lip up, on both sides)
 READ_AS = {"lipsPart": ("mouthLowerDownLeft", "mouthLowerDownRight", "mouthUpperUpLeft", "mouthUpperUpRight")}
@@ -123,6 +137,15 @@ def arkit_values(names, weights, jaw):
     out.update(jawOpen=j[0] / JAW_UPPER[0], jawLeft=j[3] / JAW_UPPER[3], jawRight=j[3] / JAW_LOWER[3],
                jawForward=j[5] / JAW_UPPER[5])
     return {a: round(float(np.clip(v, 0.0, 1.0)), 6) for a, v in out.items()}
+
+
+def opposite_pairs(names):
+    """(n, 2) int: the index pairs into ``names`` of blendshapes that drive the two controls of
+    an ARKit opposite pair (``OPPOSITES``), by any name they answer to (``drives``)."""
+    driven = [set(drives(n)) for n in names]
+    pairs = [(i, j) for a, b in OPPOSITES for i, di in enumerate(driven) if a in di
+             for j, dj in enumerate(driven) if b in dj and j != i]
+    return np.array(sorted(set(pairs)), int).reshape(-1, 2)
 
 
 def unsupported(names):

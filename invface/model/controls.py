@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ControlsError
-from .arkit import arkit_values, translate, unsupported
+from .arkit import arkit_values, opposite_pairs, translate, unsupported
 from .gaze import eye_angles
 
 
@@ -98,6 +98,7 @@ class FitVector:
         self.rotation = slice(self.P, self.P + 3)
         self.translation = slice(self.P + 3, self.size)
         self.pose = slice(self.P, self.size)
+        self.opposites = opposite_pairs(self.blendshape_names)   # (n, 2) weight indices (``arkit.OPPOSITES``)
 
     @classmethod
     def of(cls, model):
