@@ -47,7 +47,7 @@ from invface.fit.plate import fit_plate
 from invface.fit.samples import write_plate
 from invface.errors import SimulationError
 from invface.io.meshes import read_mesh
-from invface.model.arkit import ARKIT_NAMES, arkit_name, arkit_values
+from invface.model.arkit import ARKIT_NAMES, OPPOSITES, arkit_name, arkit_values
 from invface.morph.build import build_model
 from invface.render.plates import load_plate
 from invface.render.synthetic import skin_albedo, studio_light
@@ -55,12 +55,8 @@ from invface.render.synthetic import skin_albedo, studio_light
 ICT = SHARED / "ict-facekit"
 LEFT_OUT = ("tongueOut",)                    # ICT-FaceKit has no tongueOut
 POSE = ((0.03, -0.08, 0.0), (0.0, 0.0, 0.0))  # rad, m: a slight three-quarter view
-ANTAGONISTS = [("mouthLeft", "mouthRight"), ("jawLeft", "jawRight"), ("eyeLookInLeft", "eyeLookOutLeft"),
-               ("eyeLookInRight", "eyeLookOutRight"), ("eyeLookUpLeft", "eyeLookDownLeft"),
-               ("eyeLookUpRight", "eyeLookDownRight"), ("mouthSmileLeft", "mouthFrownLeft"),
-               ("mouthSmileRight", "mouthFrownRight"), ("browDownLeft", "browOuterUpLeft"),
-               ("browDownRight", "browOuterUpRight"), ("eyeBlinkLeft", "eyeWideLeft"),
-               ("eyeBlinkRight", "eyeWideRight")]
+# a face makes one control of each pair at a time (the fits' prior charges both: ``OPPOSITES``)
+ANTAGONISTS = list(OPPOSITES) + [("jawLeft", "jawRight")]
 
 
 def actors(out, template):
