@@ -55,6 +55,7 @@ NECK_DROP = 0.02          # m: the neck start is this far below the chin on the 
 EDGE_DISTANCE = 0.001     # m: an outer landmark this close to the scan's open edge ...
 PRIOR_GAP = 0.01          # m: ... whose template prior lies this far off the scan is off the scan
 FALLBACK = "the template's landmark carried by the face similarity"
+CHIN_SHARE = 0.25         # a chin candidate stands out at least this share of the largest one's prominence
 NOTCH_PROMINENCE = 0.0005  # m: a notch of the profile (the stomion, the chin-lip fold) at least this deep
 OPENING_WIDTH = 0.6       # an opening narrower than this share of the carried corners' span is not
                           # the eye or the mouth (a scanner's hole), and gives no corners
@@ -195,7 +196,8 @@ def ear_boxes(V, F, L, grow=0.005):
 def _chin(P, tip, prior, drop=0.03, prominence=0.002):
     """Index of the chin on the profile P (n,3, bottom to top): going down from the nose tip,
     the local maximum of z - y (at least ``drop`` below the tip) nearest the ``prior`` chin
-    (3,) (the template's, carried by the face similarity): the support point in the
+    (3,) (the template's, carried by the face similarity) of those whose prominence is at
+    least CHIN_SHARE of the largest one's: the support point in the
     down-and-forward direction (the gnathion, where the surface turns from facing forward to
     facing down). A full lower lip is such a maximum 3 cm above it (an ICT-FaceKit identity's
     was taken for the chin when the first maximum was), and a scan with a neck flares forward
@@ -205,9 +207,12 @@ def _chin(P, tip, prior, drop=0.03, prominence=0.002):
     if len(down) < 3:
         raise MeshError("the profile ends below the nose: no chin found")
     f = P[down, 2] - P[down, 1]
-    peaks, _ = find_peaks(f, prominence=prominence)
+    peaks, props = find_peaks(f, prominence=prominence)
     if not len(peaks):
         return int(down[np.argmax(f)])
+    # a lower lip is a small bump on the way down, the chin and a neck's base large ones: on a
+    # face longer below the mouth than the template the lip lies nearer the carried chin
+    peaks = peaks[props["prominences"] >= CHIN_SHARE * props["prominences"].max()]
     return int(down[peaks[np.argmin(np.linalg.norm(P[down[peaks]] - prior, axis=1))]])
 
 
@@ -327,13 +332,22 @@ class _ProfileSearch:
             self.prior[name] = self.carried[name]
 
     def nose(self):
-        """The nose tip (the most forward point near its prior; none: the alignment failed)
-        and the bridge (the deepest point above it)."""
+        """The nose tip and the bridge (the deepest point above the tip). The tip is, of the
+        forward bumps of the face's outline near its prior, the one nearest the prior, else the
+        most forward point there (none near the prior: the alignment failed). On a face whose
+        upper lip stands further forward than its nose, the most forward point is the lip. The
+        outline is the frontmost profile point at each height (``_front_depth``): the plane
+        also cuts the inside of the nostrils, in pieces of the profile behind it."""
         P, idx, L = self.P, self.idx, self.L
         near_tip = self.window(self.prior["nose_tip"], 0.03)
         if not near_tip.any():
             raise MeshError("the profile curve misses the nose: the alignment to the template failed")
-        self.tip = idx[near_tip][np.argmax(P[near_tip, 2])]
+        ids = idx[near_tip]
+        ids = ids[P[ids, 2] >= _front_depth(P, P[ids, 1]) - 1e-4]
+        up = ids[np.argsort(P[ids, 1], kind="stable")]
+        bumps, _ = find_peaks(P[up, 2], prominence=NOTCH_PROMINENCE)
+        self.tip = (up[bumps[np.argmin(np.linalg.norm(P[up[bumps]] - self.prior["nose_tip"], axis=1))]]
+                    if len(bumps) else up[np.argmax(P[up, 2])])
         L["nose_tip"] = P[self.tip]
         above = (idx > self.tip) & self.window(self.reanchor("nose_bridge", "nose_tip", "nose_tip"), 0.015)
         if above.any():
