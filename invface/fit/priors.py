@@ -28,8 +28,8 @@ LID_CONTROLS = ("eyeBlink",)
 
 # The opposite pairs' (``arkit.OPPOSITES``) weight, as a share of the prior's lambda: a pair set
 # to w each costs what one control at 2 w does under the full prior, whatever relief the pair
-# has (the eyeLook controls' GAZE_PRIOR). Tuned on the tuned half of the real photos, where a
-# share of 1 left mouthLeft and mouthRight set together (bench/history/2026-12.md).
+# has (the eyeLook controls' GAZE_PRIOR). Tuned on the split's tuned real photos
+# (bench/history/2026-12.md).
 OPPOSITE_PRIOR = 4.0
 # keeps the pair rows smooth at (0, 0), in weight units
 OPPOSITE_EPS = 0.01

@@ -212,8 +212,8 @@ class ShadingObjective:
                                      parts=model.parts)
         self.p_hat, self.lam1, self.lam2 = np.asarray(p_hat, float), lam1, lam2
         # the opposite pairs cost what they cost in Eq. 15, in Eq. 16's units (its curve rows
-        # weigh lam1 per px^2): at lam2 the image term, which sees the lids, set both controls of
-        # a pair that the curve stage had kept apart
+        # weigh lam1 per px^2): at lam2 the image term, which sees the lids, outweighs them and
+        # sets both controls of a pair again
         self.lam_opposite = lam1 * EQ15_LAMBDA_1 if lam_opposite is None else lam_opposite
         self.jacobian_spp = int(jacobian_spp)
         jacobian = jacobian or JACOBIAN

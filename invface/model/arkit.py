@@ -80,9 +80,8 @@ LEGACY = {
 # direction (the eye up or down, in or out; the upper lid down in a blink and up in a wide eye;
 # a mouth corner up in a smile and down in a frown; the outer brow down or up; the mouth to the
 # actor's left or right). A face makes one of each pair at a time, so the fits' prior charges
-# the smaller of the two (``fit.priors.opposite_rows``): with the eyeLook controls' prior
-# relieved the curve fit set eyeLookUp and eyeLookDown on one eye together, using both lid
-# shapes at once.
+# the part the two share (``fit.priors.opposite_rows``); without it the eyeLook controls'
+# relieved prior lets a fit trace an eye's lids with its up and down shapes at once.
 OPPOSITES = tuple(
     pair for side in ("Left", "Right") for pair in (
         (f"eyeLookUp{side}", f"eyeLookDown{side}"), (f"eyeLookIn{side}", f"eyeLookOut{side}"),
