@@ -205,6 +205,30 @@ def test_a_damaged_scan_builds_and_simulates(small_expressive_model, damage):
     assert r.converged and r.inverted == 0
 
 
+def _ict_mix_landmarks(model, seed):
+    """Face ``seed`` of ICT-FaceKit's identity space (its 20 shapes at coefficients ~ N(0, 1.5^2),
+    seeded as in bench/identity_3d.py), oriented onto ``model`` and its landmarks found: (L, off,
+    fell, annotated: Multi-PIE index -> ICT's annotated point in the model frame (3,) m, the
+    alignment). Skips without ICT-FaceKit."""
+    import json
+
+    from conftest import ICT
+    from invface.io.meshes import read_mesh
+    from invface.morph.build import orient_target
+    if not (ICT / "identities.npz").exists():
+        pytest.skip("ICT-FaceKit data (../shared/data/ict-facekit) is not available")
+    V, F = read_mesh(ICT / "neutral.obj")
+    S = np.load(ICT / "identities.npz")["deltas"]
+    mix = V + np.tensordot(np.random.default_rng(seed).normal(0, 1.5, len(S)), S, axes=1)
+    ids = json.load(open(ICT / "landmarks.json"))["landmarks_68_multipie"]
+    target, al, _, _ = orient_target(clean(mix, F, unit="cm"), model, "cm")
+    L, off, fell = find_landmarks(al.apply(target.vertices), target.faces, model)
+
+    def annotated(i):
+        return al.apply(mix[ids[i]] * 0.01)
+    return L, off, fell, annotated, al
+
+
 @pytest.mark.parametrize("seed", [3, 13])
 def test_ict_identity_mix_eye_corners(small_model, seed):
     """Faces of ICT-FaceKit's identity space (20 shapes, coefficients ~ N(0, 1.5^2), seeded as in
@@ -213,20 +237,9 @@ def test_ict_identity_mix_eye_corners(small_model, seed):
     the eye priors moved with it miss the eye openings (eye corners were 20-32 mm from ICT's
     annotated ones). An opening is now also looked for where the similarity alone puts it:
     every eye corner within 3 mm."""
-    from conftest import ICT
-    from invface.io.meshes import read_mesh
-    from invface.morph.build import orient_target
-    if not (ICT / "identities.npz").exists():
-        pytest.skip("ICT-FaceKit data (../shared/data/ict-facekit) is not available")
-    import json
-    V, F = read_mesh(ICT / "neutral.obj")
-    S = np.load(ICT / "identities.npz")["deltas"]
-    mix = V + np.tensordot(np.random.default_rng(seed).normal(0, 1.5, len(S)), S, axes=1)
-    annotated = json.load(open(ICT / "landmarks.json"))["landmarks_68_multipie"]
-    target, al, _, _ = orient_target(clean(mix, F, unit="cm"), small_model, "cm")
-    L, off, fell = find_landmarks(al.apply(target.vertices), target.faces, small_model)
+    L, off, fell, annotated, _ = _ict_mix_landmarks(small_model, seed)
     corners = {"eye_outer_R": 36, "eye_inner_R": 39, "eye_inner_L": 42, "eye_outer_L": 45}
-    err = {k: np.linalg.norm(L[k] - al.apply(mix[annotated[i]] * 0.01)) * 1000 for k, i in corners.items()}
+    err = {k: np.linalg.norm(L[k] - annotated(i)) * 1000 for k, i in corners.items()}
     assert max(err.values()) < 3.0, err
     assert not off and not fell
 
@@ -238,22 +251,11 @@ def test_ict_identity_mix_as_deep_as_wide_is_not_turned_over(small_model):
     profile then missed the nose and the alignment turned the face upside down (eye corners
     147 mm off). The plane is now the normal of least reflection error in the axes' planes:
     the face aligns upright and its landmarks sit on ICT's annotated ones."""
-    from conftest import ICT
-    from invface.io.meshes import read_mesh
-    from invface.morph.build import orient_target
-    if not (ICT / "identities.npz").exists():
-        pytest.skip("ICT-FaceKit data (../shared/data/ict-facekit) is not available")
-    import json
-    V, F = read_mesh(ICT / "neutral.obj")
-    S = np.load(ICT / "identities.npz")["deltas"]
-    mix = V + np.tensordot(np.random.default_rng(15).normal(0, 1.5, len(S)), S, axes=1)
-    target, al, _, _ = orient_target(clean(mix, F, unit="cm"), small_model, "cm")
+    L, _, _, annotated, al = _ict_mix_landmarks(small_model, 15)
     assert np.degrees(np.arccos(np.clip((np.trace(al.R) - 1) / 2, -1, 1))) < 10     # the mix is in the model frame
-    L, _, _ = find_landmarks(al.apply(target.vertices), target.faces, small_model)
-    annotated = json.load(open(ICT / "landmarks.json"))["landmarks_68_multipie"]
     points = {"nose_tip": 30, "eye_outer_R": 36, "eye_inner_R": 39, "eye_inner_L": 42, "eye_outer_L": 45,
               "mouth_corner_R": 48, "mouth_corner_L": 54}
-    err = {k: np.linalg.norm(L[k] - al.apply(mix[annotated[i]] * 0.01)) * 1000 for k, i in points.items()}
+    err = {k: np.linalg.norm(L[k] - annotated(i)) * 1000 for k, i in points.items()}
     assert max(err.values()) < 7.0, err
 
 
@@ -266,20 +268,8 @@ def test_ict_identity_mixes_whose_lips_stand_out(small_model, seed):
     nearest the prior. Face 4 is 30 mm longer below the mouth than the carried template, so its
     lower lip lay nearer the carried chin than its chin did, and was taken for it (53 mm off);
     a bump that small is no longer a chin candidate."""
-    from conftest import ICT
-    from invface.io.meshes import read_mesh
-    from invface.morph.build import orient_target
-    if not (ICT / "identities.npz").exists():
-        pytest.skip("ICT-FaceKit data (../shared/data/ict-facekit) is not available")
-    import json
-    V, F = read_mesh(ICT / "neutral.obj")
-    S = np.load(ICT / "identities.npz")["deltas"]
-    mix = V + np.tensordot(np.random.default_rng(seed).normal(0, 1.5, len(S)), S, axes=1)
-    target, al, _, _ = orient_target(clean(mix, F, unit="cm"), small_model, "cm")
-    L, _, fell = find_landmarks(al.apply(target.vertices), target.faces, small_model)
-    annotated = json.load(open(ICT / "landmarks.json"))["landmarks_68_multipie"]
-    err = {k: np.linalg.norm(L[k] - al.apply(mix[annotated[i]] * 0.01)) * 1000
-           for k, i in (("nose_tip", 30), ("subnasale", 33), ("chin", 8))}
+    L, _, fell, annotated, _ = _ict_mix_landmarks(small_model, seed)
+    err = {k: np.linalg.norm(L[k] - annotated(i)) * 1000 for k, i in (("nose_tip", 30), ("subnasale", 33), ("chin", 8))}
     assert max(err.values()) < 6.5 and not fell, (err, fell)
 
 
