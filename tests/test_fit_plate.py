@@ -143,7 +143,7 @@ def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_m
     sm = m.surface_model("blendshape")
     obj = ShadingObjective(m, sm, cam, plate, g, a, np.zeros(P), lam2=0.0, spp=16, silhouette_spp=4,
                            jacobian_spp=16, robust=None, mask=_eyes_out(m, cam, plate), jacobian="forward",
-                           lam_opposite=0.0)
+                           lam_curves=0.0)
     z = np.r_[p * 0.6, ROT, TR]
     _, grad = obj(z)
     xr, Jall = posed_jacobian(sm, z, FitVector.of(m))
@@ -152,8 +152,8 @@ def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_m
     C = obj.image_jacobian(xr, Jall, parts_x=parts)
     assert C.shape == (FitVector.of(m).size, len(r))
     np.testing.assert_allclose(C.astype(np.float64) @ r, grad, rtol=1e-4, atol=1e-6 * np.abs(grad).max())
-    # the dogleg's pieces: the same gradient, and H = C C^T (no prior, opposite pairs' rows
-    # included, no curves here)
+    # the dogleg's pieces: the same gradient, and H = C C^T (no prior: lam2 and, through
+    # lam_curves, the opposite pairs' rows are 0; no curves here)
     ne = obj.normal_equations(z)
     np.testing.assert_allclose(ne.gradient, grad, rtol=1e-5, atol=1e-8 * np.abs(grad).max())
     np.testing.assert_allclose(ne.hessian, C.astype(np.float64) @ C.T.astype(np.float64), rtol=1e-4,
@@ -186,7 +186,7 @@ def test_image_jacobian_is_the_transpose_of_the_backward_pass(small_expressive_m
     from invface.fit.shading import huber_rows
     robust = ShadingObjective(m, sm, cam, plate, g, a, np.zeros(P), lam2=0.0, spp=16, silhouette_spp=4,
                               jacobian_spp=16, robust=0.01, mask=_eyes_out(m, cam, plate), jacobian="forward",
-                              lam_opposite=0.0)
+                              lam_curves=0.0)
     psi, dpsi = huber_rows(r, 0.01)
     assert (dpsi < 1).mean() > 0.005
     ne = robust.normal_equations(z)

@@ -34,7 +34,7 @@ from ..errors import ImageError, InvfaceError, SimulationError
 from ..model.controls import FitVector
 from ..model.gaze import Eyes
 from .curves import IRIS_CURVES, CurveObjective, curve_points, fit_curves, projection_jacobian, rms_px
-from .lambdas import EQ15_LAMBDA_1, EQ16_LAMBDA_1, EQ16_TEMPORAL
+from .lambdas import EQ15_LAMBDA_1, EQ16_TEMPORAL
 from ..model.pose import pose_points, posed_parts, posed_surface, unpose_points
 from .results import NamedControls, write_fit_files
 from .shading import fit_shading
@@ -143,7 +143,7 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
         t1 = time.perf_counter()
         shade = dict(kind=skind, curves=curves, mask=plate.mask, max_iter=iters, spp=spp,
                      ftol=ftol, solver=solver, previous=previous, temporal=temporal_shading * temporal, level=level,
-                     radius=radius, lam_opposite=EQ16_LAMBDA_1 * lam_curves,
+                     radius=radius, lam_curves=lam_curves,
                      progress=lambda h: say(dict(h, stage=stage)))
         try:
             sf = fit_shading(model, cam, plate.image, calibration.gamma, calibration.albedo, cf.p, rot, tr,

@@ -183,14 +183,14 @@ class ShadingObjective:
     curve_camera: the camera of the curve term's pixels (default ``camera``); jacobian:
     'analytic' or 'forward' (``image_jacobian``; default the module's JACOBIAN, which benches
     set to compare the two); jacobian_samples: the analytic Jacobian's rays per pixel and axis;
-    lam_opposite: the opposite pairs' weight (``priors.opposite_rows``; default lam1 times Eq.
-    15's unscaled lambda_1)."""
+    lam_curves: Eq. 15's lambda_1 (px^2 per unit weight^2) that the curves were fitted with,
+    which sets the opposite pairs' weight (``priors.opposite_rows``)."""
 
     def __init__(self, model, surface_model, camera, plate, gamma, albedo, p_hat, curves=None,
                  lam1=EQ16_LAMBDA_1, lam2=EQ16_LAMBDA_2, mask=None, spp=8, silhouette_spp=0.5, seed=1, window=None,
                  jacobian_spp=2, backplate=None, robust=ROBUST_DELTA, previous=None, temporal=0.0,
                  levels=LEVELS, image_weight=1.0, curve_camera=None, jacobian=None,
-                 jacobian_samples=JACOBIAN_SAMPLES, lam_opposite=None):
+                 jacobian_samples=JACOBIAN_SAMPLES, lam_curves=EQ15_LAMBDA_1):
         import drjit as dr
         self.dr = dr
         self.model, self.sm = model, surface_model
@@ -214,7 +214,7 @@ class ShadingObjective:
         # the opposite pairs cost what they cost in Eq. 15, in Eq. 16's units (its curve rows
         # weigh lam1 per px^2): at lam2 the image term, which sees the lids, outweighs them and
         # sets both controls of a pair again
-        self.lam_opposite = lam1 * EQ15_LAMBDA_1 if lam_opposite is None else lam_opposite
+        self.lam_opposite = lam1 * lam_curves
         self.jacobian_spp = int(jacobian_spp)
         jacobian = jacobian or JACOBIAN
         if jacobian not in ("hybrid", "analytic", "forward"):
@@ -541,7 +541,7 @@ def fit_shading(model, camera, plate, gamma, albedo, p_hat, rotation, translatio
     their weight raised to the whole pyramid's), a quarter of the pixels to render and
     differentiate. radius: the dogleg's first trust radius in ``FitVector.scales()`` units.
     ``render`` options go to ``ShadingObjective`` (spp, silhouette_spp, seed, jacobian,
-    jacobian_samples, jacobian_spp, lam_opposite, backplate: default the plate with the head
+    jacobian_samples, jacobian_spp, lam_curves, backplate: default the plate with the head
     filled in from its surroundings). Returns a ShadingFit."""
     from .dogleg import dogleg, with_linear_term
     sm, vec = model.surface_model(kind), FitVector.of(model)
