@@ -1,8 +1,8 @@
-"""The actor's face from one photo, in 3D (issue 65): how close the identity-adapted head comes
-to the true face.
+"""The actor's face from one photo and from a clip, in 3D (issue 65): how close the
+identity-adapted head comes to the true face.
 
     python bench/identity_3d.py OUT [--seeds 0:15] [--tune 0:5] [--sd 1.5] [--curves detector|truth]
-                                [--json FILE] [--report-only]
+                                [--clip 24] [--turn 30] [--json FILE] [--report-only]
 
 1. Truth faces: ICT-FaceKit's neutral plus its 20 identity shapes at coefficients drawn from
    N(0, sd^2) (``--sd``, default 1.5), one face per seed, each built into an actor with
@@ -13,11 +13,18 @@ to the true face.
 3. The built-in head is posed by Eq. 15 (``pipeline.plates.pose_from_curves``) and its identity
    fitted (``fit.identity.fit_identity``) as ``fit-plate`` fits it: the face-shape space
    (``morph.identity_space``) with the proportions, then the field, the detector's own offsets
-   (``fit.identity.detector_bias``) taken off detected curves ("space"); and as before the space
-   (the proportions and the field alone, "no space"), and with the space but without the
+   (``fit.identity.detector_bias``) taken off detected curves ("space"); without the space
+   (the proportions and the field alone, "no space"); and with the space but without the
    detector's offsets ("space, no bias").
-   A face whose build stops (``BuildFailed``), or whose built actor has its eye or mouth corners, nose or chin more than 10 mm from the
-   mix's annotated ones (ICT's Multi-PIE points) is a failed build, left out and counted.
+   A face whose build stops (``BuildFailed``), or whose built actor has its eye or mouth
+   corners, nose or chin more than 10 mm from the mix's annotated ones (ICT's Multi-PIE
+   points) is a failed build, left out and counted.
+   With ``--clip N`` (default 24; 0 for the photo alone), the actor is also rendered as an
+   N-frame clip in which the head turns from -``--turn`` to +``--turn`` degrees (default 30)
+   and nods +-6 degrees, each frame detected and posed by Eq. 15 on its own, and the identity
+   fitted once, shared by the frames (``fit.identity.fit_identity_views``): "clip" with the
+   detector's offsets taken off each frame, "clip_no_bias" without. Frames where the
+   detector finds no face are left out and counted.
 4. The error: over the true face (skin within 6 cm of its nose tip), after a similarity
    alignment on those vertices, the distance of each of them to the adapted head's surface;
    median and 90th percentile in mm, beside the unadapted template's.
@@ -31,6 +38,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +46,7 @@ from _common import SHARED, add_json_option, write_json
 
 import invface
 from invface.errors import InvfaceError
-from invface.fit.identity import detector_bias, fit_identity
+from invface.fit.identity import IdentityView, detector_bias, fit_identity, fit_identity_views
 from invface.fit.samples import write_plate
 from invface.io.meshes import read_mesh
 from invface.mesh.closest import closest_points
@@ -91,19 +99,23 @@ def truth_actor(out, seed, sd, template):
     return actor, info
 
 
-def truth_plate(out, truth, seed, detector=True):
-    """The path of the actor ``truth`` rendered at neutral, level, in OUT/plates; with
-    ``detector`` its curve file is set aside (PLATE.curves.truth), so the detector finds the
-    curves, as on a user's photo."""
-    path = write_plate(truth, out / "plates", f"face{seed:02d}", "blendshape", {"weights": {}, "jaw": None},
-                       (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), seed=seed)
+NOD = np.radians(6.0)  # the clip's nod, beside its turn
+
+
+def truth_plate(out, truth, seed, detector=True, name=None, rotation=(0.0, 0.0, 0.0)):
+    """The path of the actor ``truth`` rendered at neutral, posed by ``rotation`` (3,) rad
+    (level by default), in OUT/plates as NAME.png (default faceSS); with ``detector`` its
+    curve file is set aside (PLATE.curves.truth), so the detector finds the curves, as on a
+    user's photo."""
+    path = write_plate(truth, out / "plates", name or f"face{seed:02d}", "blendshape", {"weights": {}, "jaw": None},
+                       tuple(rotation), (0.0, 0.0, 0.0), seed=seed)
     if detector:
         side = path.with_name(path.stem + ".curves.json")
         side.rename(side.with_suffix(".truth"))
     return path
 
 
-def one_face(out, seed, sd, template, curves_from):
+def one_face(out, seed, sd, template, curves_from, frames=0, turn=30.0):
     t0 = time.perf_counter()
     truth, info = truth_actor(out, seed, sd, template)
     t_build = time.perf_counter() - t0
@@ -131,13 +143,45 @@ def one_face(out, seed, sd, template, curves_from):
     print(f"face {seed}: template {row['template'][0]:.2f} mm, without the space {row['no_space'][0]:.2f}, "
           f"with it {row['space'][0]:.2f} (without the detector's bias {row['space_no_bias'][0]:.2f}) (median)",
           flush=True)
+    if frames:
+        row.update(clip_identity(out, truth, seed, template, frames, turn))
+        print(f"face {seed}: from the {row['clip_frames']}-frame clip {row['clip'][0]:.2f} mm (without the "
+              f"detector's bias {row['clip_no_bias'][0]:.2f}) (median)", flush=True)
+    return row
+
+
+def clip_identity(out, truth, seed, template, frames, turn):
+    """The identity shared by an N-frame clip of the actor ``truth`` turning from -turn to
+    +turn degrees and nodding +-NOD: {"clip", "clip_no_bias": [median, p90] mm, "clip_frames":
+    frames the detector found a face in, "clip_s", "clip_rms_px": [before, after]}."""
+    t0 = time.perf_counter()
+    views = []
+    for i, u in enumerate(np.linspace(0.0, 1.0, frames)):
+        rotation = (NOD * np.sin(2 * np.pi * u), np.radians(turn) * (2 * u - 1), 0.0)
+        path = truth_plate(out, truth, seed, name=f"face{seed:02d}_turn{i:02d}", rotation=rotation)
+        plate = load_plate(path)
+        try:
+            curves, _ = find_curves(template, plate, None)
+        except InvfaceError:
+            continue
+        pose = pose_from_curves(template, plate, curves)
+        bias = detector_bias(template, plate.camera, curves, pose.p, pose.rotation, pose.translation, _detect_curves)
+        views.append(IdentityView(plate.camera, curves, pose.p, pose.rotation, pose.translation, bias))
+    row = {"clip_frames": len(views), "clip_views_s": round(time.perf_counter() - t0, 1)}
+    for label, keep_bias in (("clip", True), ("clip_no_bias", False)):
+        t0 = time.perf_counter()
+        idf = fit_identity_views(template, [v if keep_bias else replace(v, bias=None) for v in views], space=True)
+        row[label] = face_error_mm(truth, template.neutral + idf.displacement, template.triangles)
+        row[label + "_s"] = round(time.perf_counter() - t0, 1)
+        row[label + "_rms_px"] = [round(idf.rms_before, 2), round(idf.rms_after, 2)]
     return row
 
 
 def summarise(rows, tune):
     """Label each row tune / report / failed build (``BUILT_MM``), print the table and the
     medians per set; returns {set: {model: [median, p90]}}."""
-    print(f"{'face':>6} {'set':>12} {'template mm':>14} {'no space mm':>14} {'space mm':>14} {'px before->after':>18}")
+    print(f"{'face':>6} {'set':>12} {'template mm':>14} {'no space mm':>14} {'space mm':>14} {'clip mm':>14} "
+          f"{'px before->after':>18}")
     f = lambda m: f"{m[0]:.2f} / {m[1]:.2f}"          # noqa: E731
     for r in rows:
         r["built"] = "build_error" not in r and max(r["landmark_mm"].values()) <= BUILT_MM
@@ -145,8 +189,9 @@ def summarise(rows, tune):
         if "build_error" in r:
             print(f"{r['seed']:>6} {r['set']:>12} {r['build_error'][:90]}")
             continue
+        clip = f(r["clip"]) if "clip" in r else "-"
         print(f"{r['seed']:>6} {r['set']:>12} {f(r['template']):>14} {f(r['no_space']):>14} {f(r['space']):>14} "
-              f"{r['space_rms_px'][0]:>8.2f} -> {r['space_rms_px'][1]:.2f}")
+              f"{clip:>14} {r['space_rms_px'][0]:>8.2f} -> {r['space_rms_px'][1]:.2f}")
     failed = [r["seed"] for r in rows if not r["built"]]
     if failed:
         print(f"left out, the build's landmarks more than {BUILT_MM:g} mm from the annotated ones: faces {failed}")
@@ -155,7 +200,8 @@ def summarise(rows, tune):
         sel = [r for r in rows if r["set"] == part]
         if sel:
             summary[part] = {k: [float(np.median([r[k][0] for r in sel])), float(np.median([r[k][1] for r in sel]))]
-                             for k in ("template", "no_space", "space_no_bias", "space")}
+                             for k in ("template", "no_space", "space_no_bias", "space", "clip_no_bias", "clip")
+                             if all(k in r for r in sel)}
             print(f"{part} ({len(sel)} faces), median of the per-face median / p90 (mm): " + ", ".join(
                 f"{k} {v[0]:.2f} / {v[1]:.2f}" for k, v in summary[part].items()))
     return summary
@@ -173,6 +219,8 @@ def main():
     ap.add_argument("--tune", default="0:5", help="the seeds tuned on, reported apart (default 0:5)")
     ap.add_argument("--sd", type=float, default=1.5)
     ap.add_argument("--curves", choices=("detector", "truth"), default="detector")
+    ap.add_argument("--clip", type=int, default=24, help="frames of the turning clip (default 24; 0: the photo alone)")
+    ap.add_argument("--turn", type=float, default=30.0, help="the clip's head turn each way, degrees (default 30)")
     ap.add_argument("--report-only", action="store_true", help="the table of the rows in --json, made before")
     add_json_option(ap)
     a = ap.parse_args()
@@ -184,9 +232,10 @@ def main():
     if a.report_only:
         rows = json.loads(Path(a.json).read_text())["figures"]["rows"]
     else:
-        rows = [one_face(a.out, seed, a.sd, template, a.curves) for seed in parse_range(a.seeds)]
+        rows = [one_face(a.out, seed, a.sd, template, a.curves, a.clip, a.turn) for seed in parse_range(a.seeds)]
     summary = summarise(rows, tune)
-    write_json(a.json, {"curves": a.curves, "sd": a.sd, "rows": rows, "summary": summary})
+    write_json(a.json, {"curves": a.curves, "sd": a.sd, "clip": a.clip, "turn": a.turn, "rows": rows,
+                        "summary": summary})
 
 
 if __name__ == "__main__":

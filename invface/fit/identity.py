@@ -1,4 +1,4 @@
-"""The actor's identity from one plate's curves: a smooth correction of the model's neutral.
+"""The actor's identity from the curves of one plate or of several frames: a smooth correction of the model's neutral.
 
 A model built from another face (the template, or an actor scanned once) leaves a fixed gap to
 the person in a clip: lid and lip shapes the controls cannot make, since the blendshapes and
@@ -141,73 +141,135 @@ def _operators(model):
     return (A @ Minv @ A).tocsr(), sp.diags(area)
 
 
+@dataclass
+class IdentityView:
+    """One frame the identity is fitted on: its ``camera``, curves {name: (n,2) px}, the
+    controls p (P,) and pose (rotation (3,) rad, translation (3,) m) of Eq. 15 on it, and the
+    curve source's own offsets ``bias`` {curve: (n,) px} (``detector_bias``; None for drawn
+    curves). The identity is shared by the views; expression and pose are each view's own."""
+    camera: object
+    curves: dict
+    p: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    bias: dict | None = None
+
+
 def fit_identity(model, camera, curves, p, rotation, translation, iterations=6, length=IDENTITY_LENGTH,
                  silhouette=SILHOUETTE_WEIGHT, space=False, bias=None):
     """Smooth neutral correction (IdentityFit) so that the model at controls p (P,), posed by
     rotation (3,) rad and translation (3,) m, meets the plate curves {name: (n,2) px} seen by
-    ``camera``: with ``space``, the face-shape space (where the model has one,
-    ``morph.identity_space``) with the proportions, else the proportions alone; then the
-    field. The weight mu of the field's bi-Laplacian is set so that a correction of width
-    ``length`` (m) costs as much as a pixel at each of the vertices of a curve across it: mu = (k length)^2 n_per_length, with k the camera's px per
-    metre at the face; ``silhouette``: the weight of the outline curves (``SILHOUETTES``) in
-    the field; ``bias`` {curve: (n,) px}: the curve source's own offsets from the model's
-    curves, subtracted from the residuals (``detector_bias``; None for drawn curves)."""
+    ``camera``: one view of ``fit_identity_views``, whose docstring gives the terms."""
+    return fit_identity_views(model, [IdentityView(camera, curves, p, rotation, translation, bias)],
+                              iterations=iterations, length=length, silhouette=silhouette, space=space)
+
+
+def fit_identity_views(model, views, iterations=6, length=IDENTITY_LENGTH, silhouette=SILHOUETTE_WEIGHT,
+                       space=False):
+    """Smooth neutral correction (IdentityFit) shared by ``views`` (IdentityView, each frame
+    with its own controls and pose), so that the model meets every view's curves: with
+    ``space``, the face-shape space (where the model has one, ``morph.identity_space``) with
+    the proportions, else the proportions alone; then the field. Several views with different
+    head poses pin the depth that one frontal view leaves to the space's prior: the views'
+    residuals add, while the priors stay those of one view (a prior on the face, not on each
+    frame). The weight mu of the field's bi-Laplacian is set per view so that a correction of
+    width ``length`` (m) costs as much as a pixel at each of the vertices of a curve across
+    it: mu = (k length)^2 n_per_length, with k the camera's px per metre at the face, summed
+    over the views; ``silhouette``: the weight of the outline curves (``SILHOUETTES``) in the
+    field. Curve RMS before and after are over all the views' curves."""
+    views = list(views)
+    if not views:
+        raise InvfaceError("identity: no frame to fit the identity on")
     sm = model.surface_model("blendshape")
-    inner = CurveObjective(model, sm, camera, {k: v for k, v in curves.items() if k not in SILHOUETTES}, 0.0)
-    outline = CurveObjective(model, sm, camera, {k: v for k, v in curves.items() if k in SILHOUETTES}, 0.0)
-    if not inner.curves and not outline.curves:
+    terms = [_view_terms(model, sm, v, length) for v in views]
+    if not any(inner.curves or outline.curves for _, inner, outline, _ in terms):
         raise InvfaceError("identity: none of the plate curves is a model curve")
-    every = ((inner, 1.0), (outline, 1.0))          # all curves at full weight: the proportions and the RMS
-    x = sm.surface(np.asarray(p, float))
-    V = len(x)
-    data = curve_data(x, rotation, translation, bias)
+    V = len(model.neutral)
+    every = _joint([(data, ((inner, 1.0), (outline, 1.0))) for data, inner, outline, _ in terms])
+    field_data = _joint([(data, ((inner, 1.0), (outline, silhouette))) for data, inner, outline, _ in terms])
 
     n0 = np.asarray(model.neutral, float)
-    r0 = data(0.0, *every)[0]
-    c = n0[np.concatenate([v for obj, _ in every for v in obj.vertices.values()])].mean(0)
+    r0 = every(0.0)[0]
+    c = n0[np.concatenate([v for _, inner, outline, _ in terms for obj in (inner, outline)
+                           for v in obj.vertices.values()])].mean(0)
     from ..morph.identity_space import identity_shapes
     S = identity_shapes(model) if space else None
-    D, q, coef = _global_shape(n0, c, np.zeros((0, V, 3)) if S is None else S, lambda d: data(d, *every))
+    D, q, coef = _global_shape(n0, c, np.zeros((0, V, 3)) if S is None else S, every, views=len(views))
     d = np.zeros((V, 3))
-    field_terms = ((inner, 1.0), (outline, silhouette))
-    if inner.curves:
+    mu = sum(m for *_, m in terms)
+    if mu > 0:
         K, M = _operators(model)
-        depth = float(np.median((pose_points(x, rotation, translation) @ camera.R.T + camera.t)[:, 2]))
-        k = float(camera.K[0, 0]) / max(depth, 1e-6)                       # px per metre at the face
-        spacing = float(np.median([np.linalg.norm(np.diff(x[v], axis=0), axis=1).mean()
-                                   for v in inner.vertices.values()]))
-        mu = (k * length) ** 2 * (length / spacing)
         reg = sp.kron(mu * K + mu / IDENTITY_ANCHOR ** 4 * M, sp.eye(3)).tocsr()
-        _, g, blocks = data(D, *field_terms)
-        # the data Jacobian's pattern (rows: residuals, columns: 3 vid + axis), the same every step
-        first = np.cumsum([0] + [len(a) for _, a in blocks])
-        rows = np.concatenate([np.broadcast_to((f + np.arange(len(a)))[:, None, None], a.shape).ravel()
-                               for f, (_, a) in zip(first, blocks)])
-        cols = np.concatenate([np.broadcast_to(3 * v[None, :, None] + np.arange(3), a.shape).ravel()
-                               for v, a in blocks])
-        for _ in range(iterations):
-            A = sp.csr_matrix((np.concatenate([a.ravel() for _, a in blocks]), (rows, cols)),
-                              shape=(first[-1], 3 * V))
-            H = reg + (A.T @ A).tocsr()
-            step = spsolve(H.tocsc(), -(reg @ d.ravel() + g.ravel())).reshape(V, 3)
-            d = d + step
-            _, g, blocks = data(D + d, *field_terms)
-            if np.abs(step).max() < 1e-6:
-                break
+        d = _field(field_data, D, reg, V, iterations)
     rms = lambda r: rms_px({"all": r})         # noqa: E731
-    return IdentityFit(D + d, rms(r0), rms(data(D + d, *every)[0]),
+    return IdentityFit(D + d, rms(r0), rms(every(D + d)[0]),
                        float(np.linalg.norm(d, axis=1).max() * 1e3), q, coef)
 
 
-def _global_shape(x, c, S, data, iterations=10, step=1e-4):
+def _view_terms(model, sm, view, length=IDENTITY_LENGTH):
+    """One view's (curve data of ``curve_data``, inner CurveObjective, outline CurveObjective,
+    its share mu of the field's weight (0 without inner curves))."""
+    curves = view.curves
+    inner = CurveObjective(model, sm, view.camera, {k: v for k, v in curves.items() if k not in SILHOUETTES}, 0.0)
+    outline = CurveObjective(model, sm, view.camera, {k: v for k, v in curves.items() if k in SILHOUETTES}, 0.0)
+    x = sm.surface(np.asarray(view.p, float))
+    mu = 0.0
+    if inner.curves:
+        cam = view.camera
+        depth = float(np.median((pose_points(x, view.rotation, view.translation) @ cam.R.T + cam.t)[:, 2]))
+        k = float(cam.K[0, 0]) / max(depth, 1e-6)                       # px per metre at the face
+        spacing = float(np.median([np.linalg.norm(np.diff(x[v], axis=0), axis=1).mean()
+                                   for v in inner.vertices.values()]))
+        mu = (k * length) ** 2 * (length / spacing)
+    return curve_data(x, view.rotation, view.translation, view.bias), inner, outline, mu
+
+
+def _joint(parts):
+    """The curve term of several views as one ``data(d)``: parts: (a view's ``curve_data``,
+    its (CurveObjective, weight) pairs); rows and blocks in the views' order, gradients added."""
+    def data(d):
+        rows, g, blocks = [], 0.0, []
+        for view_data, objs in parts:
+            r, gv, b = view_data(d, *objs)
+            rows.append(r)
+            g = g + gv
+            blocks += b
+        return np.concatenate(rows), g, blocks
+    return data
+
+
+def _field(data, D, reg, V, iterations):
+    """The field d (V,3) m on top of the global shape D (V,3) m: Gauss-Newton on the curve term
+    ``data`` with the regulariser ``reg`` (3V,3V), one sparse solve per step."""
+    d = np.zeros((V, 3))
+    _, g, blocks = data(D)
+    # the data Jacobian's pattern (rows: residuals, columns: 3 vid + axis), the same every step
+    first = np.cumsum([0] + [len(a) for _, a in blocks])
+    rows = np.concatenate([np.broadcast_to((f + np.arange(len(a)))[:, None, None], a.shape).ravel()
+                           for f, (_, a) in zip(first, blocks)])
+    cols = np.concatenate([np.broadcast_to(3 * v[None, :, None] + np.arange(3), a.shape).ravel()
+                           for v, a in blocks])
+    for _ in range(iterations):
+        A = sp.csr_matrix((np.concatenate([a.ravel() for _, a in blocks]), (rows, cols)), shape=(first[-1], 3 * V))
+        H = reg + (A.T @ A).tocsr()
+        step = spsolve(H.tocsc(), -(reg @ d.ravel() + g.ravel())).reshape(V, 3)
+        d = d + step
+        _, g, blocks = data(D + d)
+        if np.abs(step).max() < 1e-6:
+            break
+    return d
+
+
+def _global_shape(x, c, S, data, iterations=10, step=1e-4, views=1):
     """The face-shape space's coefficients and the proportions (module docstring) for the neutral
     x (V,3) m about c (3,), jointly: (their displacement (V,3) m, the proportions (4,), the
     coefficients (K,)). S (K,V,3) m: the space's shapes (K may be 0); ``data(d)``: the curves'
     (residuals (n,) px, gradient, blocks (vertex ids (m,), d r / d d (n_b,m,3))) of a
-    displacement d (V,3). Gauss-Newton with the coefficients' Jacobian from the blocks and the
-    proportions' by finite differences; the priors cost |c|^2 n IDENTITY_PRIOR_PX^2 (a
-    Gaussian, the shapes being in standard deviations) and |q|^2 n / ln(1 + IDENTITY_MAX_SCALE)^2
-    (n residuals)."""
+    displacement d (V,3), over ``views`` frames. Gauss-Newton with the coefficients' Jacobian
+    from the blocks and the proportions' by finite differences; the priors cost
+    |c|^2 n IDENTITY_PRIOR_PX^2 (a Gaussian, the shapes being in standard deviations) and
+    |q|^2 n / ln(1 + IDENTITY_MAX_SCALE)^2, with n the residuals of one view (their count over
+    the views divided by ``views``)."""
     K = len(S)
     theta = np.zeros(K + 4)
     proportions = _proportion_field(x, c)
@@ -216,7 +278,7 @@ def _global_shape(x, c, S, data, iterations=10, step=1e-4):
         return np.tensordot(t[:K], S, axes=1) + proportions(t[K:])
 
     r, _, blocks = data(displacement(theta))
-    prior = len(r) * np.concatenate([np.full(K, IDENTITY_PRIOR_PX ** 2),
+    prior = len(r) / views * np.concatenate([np.full(K, IDENTITY_PRIOR_PX ** 2),
                                      np.full(4, 1 / np.log1p(IDENTITY_MAX_SCALE) ** 2)])
     for _ in range(iterations):
         J = np.zeros((len(r), K + 4))
