@@ -29,8 +29,9 @@ def main():
         if "message" in event:
             lines.append(event["message"])
             print(event["message"], flush=True)
-    frame, _, _, _, why = pick_neutral(model, clip, progress=progress,
-                                       over="the selected frames" if a.frames else "the whole shot")
+    chosen, why, _ = pick_neutral(model, clip, progress=progress,
+                                  over="the selected frames" if a.frames else "the whole shot")
+    frame = chosen.frame
     print(f"picked {frame.name}: {why}")
     write_json(a.json, {"clip": str(clip.source), "frames": a.frames, "picked": frame.name, "why": why,
                         "candidates": lines})

@@ -215,10 +215,42 @@ def test_the_calibration_frame_is_the_most_neutral_of_the_whole_shot(small_expre
     _, frames, _ = clip
     asked = open_clip(frames, "3:6")
     assert 0 not in asked.indices
-    frame, curves, source, pose, why = pick_neutral(m, open_clip(frames), candidates=6, over="the whole shot")
+    chosen, why, seen = pick_neutral(m, open_clip(frames), candidates=6, over="the whole shot")
+    frame, pose = chosen.frame, chosen.pose
+    assert [c.frame.index for c in seen] == list(range(6)) and any(c is chosen for c in seen)
     truth = [sum(w.values()) + 10 * jaw[0] for w, jaw, _, _ in clip_controls(m, N_FRAMES)]
     assert frame.index == int(np.argmin(truth)) == 0
     assert why.startswith("the most neutral-looking of 6 frames spread over the whole shot (expression")
     open_eyes, _ = neutral_score(pose, {"eyeBlinkLeft": 0.0, "eyeBlinkRight": 0.0})
     shut, parts = neutral_score(pose, {"eyeBlinkLeft": 1.0, "eyeBlinkRight": 1.0})
     assert shut - open_eyes == pytest.approx(EYES_SHUT_COST) and set(parts) == {"weights", "jaw", "eyes shut"}
+
+
+def test_an_identity_in_the_space_is_shared_by_the_frames_looked_at(small_expressive_model, clip, tmp_path):
+    """With the face-shape space, a clip's identity is fitted on the calibration frame and the
+    other frames looked at to choose it: run.json names them, the sentence says how many, and
+    a resumed run with the same frames reuses actor.npz, while one with the same calibration
+    frame but other frames beside it fits the identity again."""
+    from dataclasses import replace
+
+    from invface.pipeline.clips import open_clip
+    from invface.io.jsonfile import write_object
+    from invface.pipeline.runs import read_run
+    from invface.pipeline.session import prepare_run, shot_frame
+    m = small_expressive_model
+    _, frames, _ = clip
+    shot = shot_frame(m, open_clip(frames))
+    assert len(shot.others) == N_FRAMES - 1 and all(c.frame is not shot.frame for c in shot.others)
+    _, _, rec = prepare_run(m, shot, tmp_path, calibration=object(), identity_space=True)
+    assert rec["identity_frames"] == [c.frame.digest for c in shot.others]
+    assert f"and {N_FRAMES - 1} other frame(s)" in rec["identity"]
+    write_object(tmp_path / "run.json", rec)
+    assert read_run(tmp_path)["identity_frames"] == rec["identity_frames"]
+    said = []
+    prepare_run(m, shot, tmp_path, calibration=object(), identity_space=True,
+                progress=lambda e: said.append(e.get("message", "")))
+    assert any(t.startswith("reusing") and "identity" in t for t in said), said
+    said.clear()
+    _, _, fewer = prepare_run(m, replace(shot, others=shot.others[:2]), tmp_path, calibration=object(),
+                              identity_space=True, progress=lambda e: said.append(e.get("message", "")))
+    assert not any(t.startswith("reusing") for t in said) and "and 2 other frame(s)" in fewer["identity"]

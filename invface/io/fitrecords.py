@@ -58,7 +58,7 @@ def _checked(rec, data, readers):
 
 def read_run_json(path, error=InvfaceError):
     """The run.json at ``path`` as a dict ({} when there is none), with its fields checked where
-    present: frames and kinds (lists of str), inputs, identity, identity_from, calibrated_on,
+    present: frames, kinds and identity_frames (lists of str), inputs, identity, identity_from, calibrated_on,
     calibration_frame, calibration_why (str), finished and identity_space (true / false), fps
     (> 0)."""
     path = Path(path)
@@ -66,7 +66,8 @@ def read_run_json(path, error=InvfaceError):
         return {}
     data = read_object(path, error, what="run record (run.json; rerun the fit with --restart to rewrite it)")
     f = Fields(data, path, error)
-    readers = {"frames": f.strings, "kinds": f.strings, "finished": f.boolean, "identity_space": f.boolean,
+    readers = {"frames": f.strings, "kinds": f.strings, "identity_frames": f.strings, "finished": f.boolean,
+               "identity_space": f.boolean,
                "fps": lambda n, default: f.number(n, default, low=1e-6)}
     readers.update(dict.fromkeys(("inputs", "identity", "identity_from", "calibrated_on", "calibration_frame",
                                   "calibration_why"), f.text))

@@ -2,8 +2,10 @@
 (Eq. 14 once per shot) and the model adapted to the actor's face."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from ..errors import InvfaceError
-from .plates import _say
+from .plates import DETECTOR, _say
 
 
 # how much a shut eye counts against a calibration candidate, in the score's units (a weight
@@ -22,17 +24,28 @@ def neutral_score(pose, peer=None):
     return sum(parts.values()), parts
 
 
+@dataclass(eq=False)
+class Candidate:
+    """A frame looked at for the calibration: the clip's Frame, its curves {name: (n, 2) px},
+    their source, and its curve fit's PoseEstimate (Eq. 15)."""
+    frame: object
+    curves: dict
+    source: str
+    pose: object
+
+
 def pick_neutral(model, clip, candidates=8, lam=None, progress=None, face=0, over="the selected frames"):
     """The clip's most neutral-looking frame to calibrate on (Eq. 14 once per shot): among up
     to ``candidates`` frames evenly spread over ``clip`` (the frames asked for, or the whole
     shot: ``over`` names which, for the sentence), the one of least ``neutral_score``: its
     curve fit's (Eq. 15, blendshape rig, ``pose_from_curves``) expression and jaw, and its eyes
-    shut. Returns (Frame, its curves, their source, its PoseEstimate, a sentence saying why it
-    was chosen)."""
+    shut. Returns (the chosen Candidate, a sentence saying why it was chosen, every Candidate
+    in which a face was found, in clip order)."""
     from .plates import find_curves, pose_from_curves
     n = len(clip)
-    positions = sorted({round(i * (n - 1) / max(candidates - 1, 1)) for i in range(min(candidates, n))})
-    best, tried = None, 0
+    k = min(candidates, n)                          # a clip shorter than that: every frame
+    positions = sorted({round(i * (n - 1) / max(k - 1, 1)) for i in range(k)})
+    best, seen = None, []
     for pos in positions:
         frame = next(clip.frames(pos, pos + 1))
         try:
@@ -40,20 +53,30 @@ def pick_neutral(model, clip, candidates=8, lam=None, progress=None, face=0, ove
         except InvfaceError as e:
             _say(progress, message=f"{frame.name}: not a calibration candidate ({e})")
             continue
-        tried += 1
-        pose = pose_from_curves(model, frame.plate, curves, lam, source=source)
-        score, parts = neutral_score(pose, frame.plate.peer_arkit)
+        seen.append(Candidate(frame, curves, source, pose_from_curves(model, frame.plate, curves, lam, source=source)))
+        score, parts = neutral_score(seen[-1].pose, frame.plate.peer_arkit)
         _say(progress, message=f"{frame.name}: expression {score:.2f} ("
                                + ", ".join(f"{k} {v:.2f}" for k, v in parts.items()) + ")")
         if best is None or score < best[0]:
-            best = (score, frame, curves, source, pose, parts)
+            best = (score, seen[-1], parts)
     if best is None:
         raise InvfaceError(f"{clip.source}: no face found in the {len(positions)} frames tried for the calibration; "
                            "pass --calib or --neutral-frame")
-    score, frame, curves, source, pose, parts = best
-    why = (f"the most neutral-looking of {tried} frames spread over {over} (expression {score:.2f}: "
+    score, chosen, parts = best
+    why = (f"the most neutral-looking of {len(seen)} frames spread over {over} (expression {score:.2f}: "
            + ", ".join(f"{k} {v:.2f}" for k, v in parts.items()) + ")")
-    return frame, curves, source, pose, why
+    return chosen, why, seen
+
+
+def _view(model, candidate, space):
+    """The IdentityView of a Candidate: with ``space``, the detector's own offsets
+    (``fit.identity.detector_bias``, on a render of the model at its fitted pose) taken off
+    curves the detector found."""
+    from ..fit.identity import IdentityView, detector_bias
+    c, pose, camera = candidate, candidate.pose, candidate.frame.plate.camera
+    bias = (detector_bias(model, camera, c.curves, pose.p, pose.rotation, pose.translation, _detect_curves)
+            if space and c.source == DETECTOR else None)
+    return IdentityView(camera, c.curves, pose.p, pose.rotation, pose.translation, bias)
 
 
 def _detect_curves(image_srgb):
@@ -65,27 +88,28 @@ def _detect_curves(image_srgb):
         return None
 
 
-def actor_identity(model, frame, curves, lam=None, pose=None, progress=None, source="", space=False):
+def actor_identity(model, frame, curves, lam=None, pose=None, progress=None, source="", space=False, others=()):
     """The model adapted to the actor of a shot from one neutral-looking frame's curves
     {name: (n,2) px}: the controls and pose of Eq. 15 (``pose``, a PoseEstimate, or fitted
-    here), then a smooth neutral correction (``fit.identity.fit_identity``) carried into the
-    anatomy (``morph.build.adapt_identity``). With ``space`` the correction starts in the
-    face-shape space, and curves whose ``source`` is the landmark detector (``plates.DETECTOR``)
-    first lose the detector's own offsets from the model's curves
-    (``fit.identity.detector_bias``). Returns (FaceModel, IdentityFit); the model is
-    ``model`` itself when the correction is larger than ``IDENTITY_MAX_MM`` (not an identity:
-    a wrong frame or wrong curves), with a message saying so."""
-    from ..fit.identity import IDENTITY_MAX_MM, detector_bias, fit_identity
+    here), then a smooth neutral correction (``fit.identity.fit_identity_views``) carried into
+    the anatomy (``morph.build.adapt_identity``). With ``space`` the correction starts in the
+    face-shape space and is shared with the frames ``others`` (Candidates: each with its own
+    controls and pose; several head poses pin the depth one view cannot), and curves whose
+    source is the landmark detector (``plates.DETECTOR``) first lose the detector's own
+    offsets from the model's curves (``fit.identity.detector_bias``). Returns (FaceModel,
+    IdentityFit); the model is ``model`` itself when the correction is larger than
+    ``IDENTITY_MAX_MM`` (not an identity: a wrong frame or wrong curves), with a message saying
+    so."""
+    from ..fit.identity import IDENTITY_MAX_MM, fit_identity_views
     from ..morph.build import adapt_identity
-    from .plates import DETECTOR, pose_from_curves
+    from .plates import pose_from_curves
     pose = pose or pose_from_curves(model, frame.plate, curves, lam)
-    bias = None
-    if space and source == DETECTOR:
-        _say(progress, message="the detector's own offsets, on a render of the model at the fitted pose")
-        bias = detector_bias(model, frame.plate.camera, curves, pose.p, pose.rotation, pose.translation,
-                             _detect_curves)
-    fit = fit_identity(model, frame.plate.camera, curves, pose.p, pose.rotation, pose.translation, space=space,
-                       bias=bias)
+    shots = [Candidate(frame, curves, source, pose)] + (list(others) if space else [])
+    if space:
+        _say(progress, message=f"the actor's identity shared by {len(shots)} frame(s)"
+                               + (", the detector's own offsets taken off each" if any(
+                                   c.source == DETECTOR for c in shots) else ""))
+    fit = fit_identity_views(model, [_view(model, c, space) for c in shots], space=space)
     if fit.max_mm > IDENTITY_MAX_MM:
         _say(progress, message=f"{frame.name}: {fit.describe()}: more than {IDENTITY_MAX_MM:g} mm is no identity "
                                "correction; the model is used as it is")

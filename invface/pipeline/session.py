@@ -19,13 +19,16 @@ from .plates import _say
 class ShotFrame:
     """The frame a run calibrates on and takes the actor's identity from: the clip's Frame, its
     curves {name: (n, 2) px} and their source, the curve fit's PoseEstimate when one was made
-    to choose it (else None), and why it was chosen (a phrase for run.json and the page)."""
+    to choose it (else None), why it was chosen (a phrase for run.json and the page), and the
+    other frames looked at to choose it (``neutral.Candidate``s), which an identity in the
+    face-shape space shares."""
 
     frame: object
     curves: dict
     source: str
     pose: object
     why: str
+    others: tuple = ()
 
 
 def shot_frame(model, clip, whole=None, neutral_frame=None, curves=None, face=0, lam=None, progress=None):
@@ -51,10 +54,10 @@ def shot_frame(model, clip, whole=None, neutral_frame=None, curves=None, face=0,
         return ShotFrame(frame, found, source, None, "the plate itself")
     over = "the whole shot" if whole is not None else "the selected frames"
     _say(progress, message=f"picking the most neutral-looking frame of {over} to calibrate on")
-    frame, found, source, pose, why = pick_neutral(model, whole or clip, lam=lam, progress=progress, face=face,
-                                                   over=over)
-    _say(progress, message=f"calibrating on {frame.name}: {why}")
-    return ShotFrame(frame, found, source, pose, why)
+    chosen, why, seen = pick_neutral(model, whole or clip, lam=lam, progress=progress, face=face, over=over)
+    _say(progress, message=f"calibrating on {chosen.frame.name}: {why}")
+    return ShotFrame(chosen.frame, chosen.curves, chosen.source, chosen.pose, why,
+                     tuple(c for c in seen if c is not chosen))
 
 
 def prepare_run(model, shot, out, calibration=None, identity=True, restart=False, lam=None, calibrate=None,
@@ -66,8 +69,9 @@ def prepare_run(model, shot, out, calibration=None, identity=True, restart=False
     calibration came from another frame is refused unless ``restart``. With ``identity`` the
     model is adapted to the shot frame's face (``neutral.actor_identity``) and saved as
     out/actor.npz, or that file is reused when the run being resumed made it from the same
-    frame; the model is then read back from it, as a resumed run reads it; ``identity_space``:
-    the adaptation starts in the face-shape space (``neutral.actor_identity``). Without a given
+    frames; the model is then read back from it, as a resumed run reads it; ``identity_space``:
+    the adaptation starts in the face-shape space and is shared by the shot's other frames
+    (``neutral.actor_identity``; run.json's identity_frames). Without a given
     ``calibration``, out/calib.npz is reused likewise or made by ``calibrate(model, plate,
     path, curves, source)`` (default: ``plates.auto_calibrate`` and save). Returns (model,
     Calibration or PlateCalibration, {run.json keys})."""
@@ -82,6 +86,8 @@ def prepare_run(model, shot, out, calibration=None, identity=True, restart=False
     mine = {"identity_from": frame.digest if identity else None}
     if identity_space:
         mine["identity_space"] = True
+        if identity and shot.others:
+            mine["identity_frames"] = [c.frame.digest for c in shot.others]
     if calibration is None:
         mine["calibrated_on"] = frame.digest
     if earlier_fits(out) and any(before.get(k) != v for k, v in mine.items()) and not restart:
@@ -90,8 +96,7 @@ def prepare_run(model, shot, out, calibration=None, identity=True, restart=False
     if identity:
         model, record["identity"] = _identity(model, shot, out, before, lam, progress, identity_space)
         record["identity_from"] = frame.digest
-        if identity_space:
-            record["identity_space"] = True
+        record.update({k: v for k, v in mine.items() if k in ("identity_space", "identity_frames")})
     if calibration is None:
         saved = out / "calib.npz"
         if saved.is_file() and all(before.get(k) == v for k, v in mine.items()):
@@ -105,26 +110,34 @@ def prepare_run(model, shot, out, calibration=None, identity=True, restart=False
 
 
 def _identity(model, shot, out, before, lam, progress, space=False):
-    """(the model adapted to the shot frame's face and read back from out/actor.npz, the
-    sentence run.json keeps), reusing the resumed run's actor.npz made from the same frame."""
+    """(the model adapted to the shot frame's face, with ``space`` shared by the shot's other
+    frames, and read back from out/actor.npz, the sentence run.json keeps), reusing the resumed
+    run's actor.npz made from the same frames."""
     from ..model.facemodel import FaceModel
     from .neutral import actor_identity
     frame, actor = shot.frame, out / "actor.npz"
-    if actor.is_file() and before.get("identity_from") == frame.digest and before.get("identity_space", False) == space:
-        _say(progress, message=f"reusing {actor}: the actor's identity from {frame.name}, made by the run being resumed")
+    others = list(shot.others) if space else []
+    same = (before.get("identity_from") == frame.digest and before.get("identity_space", False) == space
+            and before.get("identity_frames", []) == [c.frame.digest for c in others])
+    if actor.is_file() and same:
+        _say(progress, message=f"reusing {actor}: the actor's identity from {frame.name}"
+                               + (f" and {len(others)} other frame(s)" if others else "")
+                               + ", made by the run being resumed")
         said = before.get("identity", "")
     else:
-        _say(progress, message=f"the actor's identity from the curves of {frame.name}")
+        names = frame.name + (f" and {len(others)} other frame(s) ({', '.join(c.frame.name for c in others)})"
+                              if others else "")
+        _say(progress, message=f"the actor's identity from the curves of {names}")
         adapted, fit = actor_identity(model, frame, shot.curves, lam=lam, pose=shot.pose, progress=progress,
-                                      source=shot.source, space=space)
+                                      source=shot.source, space=space, others=others)
         out.mkdir(parents=True, exist_ok=True)
         adapted.save(actor)
         if adapted is not model:
             from ..report.identity import NAME, write_identity_figure
             write_identity_figure(out / NAME, model.neutral, adapted.neutral, adapted.triangles, fit.coefficients)
-        said = (f"The model was adapted to the face of {frame.name} first ({fit.describe()}; {actor.name})"
+        said = (f"The model was adapted to the face of {names} first ({fit.describe()}; {actor.name})"
                 if adapted is not model else
-                f"The model is used as it is: the identity fit on {frame.name} moved it too far ({fit.describe()})")
+                f"The model is used as it is: the identity fit on {names} moved it too far ({fit.describe()})")
     return FaceModel.load(actor), said           # as a resumed run reads it: the same bytes, the same run hash
 
 
