@@ -23,8 +23,11 @@ identity-adapted head comes to the true face.
    N-frame clip in which the head turns from -``--turn`` to +``--turn`` degrees (default 30)
    and nods +-6 degrees, each frame detected and posed by Eq. 15 on its own, and the identity
    fitted once, shared by the frames (``fit.identity.fit_identity_views``): "clip" with the
-   detector's offsets taken off each frame, "clip_no_bias" without. Frames where the
-   detector finds no face are left out and counted.
+   detector's offsets taken off each frame, "clip_no_bias" without; and shared by the frames
+   ``fit-plate --identity-space`` would share it over, the most neutral-looking and those that
+   show the head from another side ("clip_fit_plate", "clip_fit_plate_no_bias"). Frames where
+   the detector finds no face are left out and counted. The frames' views are kept in
+   OUT/views, so a rerun only fits.
 4. The error: over the true face (skin within 6 cm of its nose tip), after a similarity
    alignment on those vertices, the distance of each of them to the adapted head's surface;
    median and 90th percentile in mm, beside the unadapted template's.
@@ -36,10 +39,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import pickle
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 from _common import SHARED, add_json_option, write_json
@@ -52,8 +57,9 @@ from invface.io.meshes import read_mesh
 from invface.mesh.closest import closest_points
 from invface.morph.build import build_model
 from invface.morph.orient import kabsch
-from invface.pipeline.neutral import _detect_curves
-from invface.pipeline.plates import find_curves, pose_from_curves
+from invface.model.controls import FitVector
+from invface.pipeline.neutral import Candidate, _detect_curves, distinct_views, neutral_score
+from invface.pipeline.plates import DETECTOR, find_curves, pose_from_curves
 from invface.render.plates import load_plate
 from real_scans import ICT_POINTS
 
@@ -146,14 +152,20 @@ def one_face(out, seed, sd, template, curves_from, frames=0, turn=30.0):
     if frames:
         row.update(clip_identity(out, truth, seed, template, frames, turn))
         print(f"face {seed}: from the {row['clip_frames']}-frame clip {row['clip'][0]:.2f} mm (without the "
-              f"detector's bias {row['clip_no_bias'][0]:.2f}) (median)", flush=True)
+              f"detector's bias {row['clip_no_bias'][0]:.2f}); from the {row['clip_fit_plate_views']} frames "
+              f"fit-plate shares {row['clip_fit_plate'][0]:.2f} (without the bias "
+              f"{row['clip_fit_plate_no_bias'][0]:.2f}) (median)", flush=True)
     return row
 
 
-def clip_identity(out, truth, seed, template, frames, turn):
-    """The identity shared by an N-frame clip of the actor ``truth`` turning from -turn to
-    +turn degrees and nodding +-NOD: {"clip", "clip_no_bias": [median, p90] mm, "clip_frames":
-    frames the detector found a face in, "clip_s", "clip_rms_px": [before, after]}."""
+def clip_views(out, truth, seed, template, frames, turn):
+    """The IdentityViews of an N-frame clip of the actor ``truth`` turning from -turn to +turn
+    degrees and nodding +-NOD, each frame detected, posed by Eq. 15 and with the detector's
+    offsets (``detector_bias``) beside it, and the seconds they took; kept in OUT/views (a
+    rerun refits from them)."""
+    cache = out / "views" / f"face{seed:02d}_{frames}x{turn:g}.pkl"
+    if cache.is_file():
+        return pickle.loads(cache.read_bytes()), 0.0
     t0 = time.perf_counter()
     views = []
     for i, u in enumerate(np.linspace(0.0, 1.0, frames)):
@@ -167,13 +179,38 @@ def clip_identity(out, truth, seed, template, frames, turn):
         pose = pose_from_curves(template, plate, curves)
         bias = detector_bias(template, plate.camera, curves, pose.p, pose.rotation, pose.translation, _detect_curves)
         views.append(IdentityView(plate.camera, curves, pose.p, pose.rotation, pose.translation, bias))
-    row = {"clip_frames": len(views), "clip_views_s": round(time.perf_counter() - t0, 1)}
-    for label, keep_bias in (("clip", True), ("clip_no_bias", False)):
+    cache.parent.mkdir(exist_ok=True)
+    cache.write_bytes(pickle.dumps(views))
+    return views, time.perf_counter() - t0
+
+
+def fit_plate_views(template, views):
+    """The views ``fit-plate --identity-space`` shares an identity over: the most neutral-looking
+    frame (``neutral_score``) and the others that show the head from another side
+    (``distinct_views``); as the pipeline looks at 8 frames of a clip, not all."""
+    vector = FitVector.of(template)
+    cands = [Candidate(None, v.curves, DETECTOR, SimpleNamespace(p=v.p, rotation=v.rotation, vector=vector))
+             for v in views]
+    chosen = min(cands, key=lambda c: neutral_score(c.pose)[0])
+    kept = [chosen] + distinct_views(chosen, [c for c in cands if c is not chosen])
+    return [views[cands.index(c)] for c in kept]
+
+
+def clip_identity(out, truth, seed, template, frames, turn):
+    """The identity shared by the frames of the turning clip (``clip_views``): {"clip",
+    "clip_no_bias" (every frame), "clip_fit_plate", "clip_fit_plate_no_bias" (``fit_plate_views``):
+    [median, p90] mm, with _s (seconds), _rms_px ([before, after]) and _views (frames used)}."""
+    views, seconds = clip_views(out, truth, seed, template, frames, turn)
+    row = {"clip_frames": len(views), "clip_views_s": round(seconds, 1)}
+    chosen = fit_plate_views(template, views)
+    for label, use, keep_bias in (("clip", views, True), ("clip_no_bias", views, False),
+                                  ("clip_fit_plate", chosen, True), ("clip_fit_plate_no_bias", chosen, False)):
         t0 = time.perf_counter()
-        idf = fit_identity_views(template, [v if keep_bias else replace(v, bias=None) for v in views], space=True)
+        idf = fit_identity_views(template, [v if keep_bias else replace(v, bias=None) for v in use], space=True)
         row[label] = face_error_mm(truth, template.neutral + idf.displacement, template.triangles)
         row[label + "_s"] = round(time.perf_counter() - t0, 1)
         row[label + "_rms_px"] = [round(idf.rms_before, 2), round(idf.rms_after, 2)]
+        row[label + "_views"] = len(use)
     return row
 
 
@@ -200,7 +237,8 @@ def summarise(rows, tune):
         sel = [r for r in rows if r["set"] == part]
         if sel:
             summary[part] = {k: [float(np.median([r[k][0] for r in sel])), float(np.median([r[k][1] for r in sel]))]
-                             for k in ("template", "no_space", "space_no_bias", "space", "clip_no_bias", "clip")
+                             for k in ("template", "no_space", "space_no_bias", "space", "clip_no_bias", "clip",
+                                       "clip_fit_plate_no_bias", "clip_fit_plate")
                              if all(k in r for r in sel)}
             print(f"{part} ({len(sel)} faces), median of the per-face median / p90 (mm): " + ", ".join(
                 f"{k} {v[0]:.2f} / {v[1]:.2f}" for k, v in summary[part].items()))

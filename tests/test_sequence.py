@@ -226,24 +226,32 @@ def test_the_calibration_frame_is_the_most_neutral_of_the_whole_shot(small_expre
     assert shut - open_eyes == pytest.approx(EYES_SHUT_COST) and set(parts) == {"weights", "jaw", "eyes shut"}
 
 
-def test_an_identity_in_the_space_is_shared_by_the_frames_looked_at(small_expressive_model, clip, tmp_path):
+def test_an_identity_in_the_space_is_shared_by_the_frames_that_show_another_side(small_expressive_model, clip,
+                                                                                tmp_path):
     """With the face-shape space, a clip's identity is fitted on the calibration frame and the
-    other frames looked at to choose it: run.json names them, the sentence says how many, and
-    a resumed run with the same frames reuses actor.npz, while one with the same calibration
-    frame but other frames beside it fits the identity again."""
+    frames looked at to choose it that show the head from another side (``distinct_views``):
+    run.json names them, the sentence says how many, and a resumed run with the same frames
+    reuses actor.npz, while one with the same calibration frame alone fits the identity again."""
     from dataclasses import replace
+    from types import SimpleNamespace
 
-    from invface.pipeline.clips import open_clip
     from invface.io.jsonfile import write_object
+    from invface.pipeline.clips import open_clip
+    from invface.pipeline.neutral import Candidate, distinct_views
     from invface.pipeline.runs import read_run
     from invface.pipeline.session import prepare_run, shot_frame
+    at = lambda yaw: Candidate(None, {}, "", SimpleNamespace(rotation=(0.0, yaw, 0.0)))     # noqa: E731
+    turns = [at(y) for y in (0.05, 0.12, 0.2, 0.3, -0.09)]
+    assert distinct_views(at(0.0), turns) == [turns[1], turns[3]]
     m = small_expressive_model
     _, frames, _ = clip
     shot = shot_frame(m, open_clip(frames))
     assert len(shot.others) == N_FRAMES - 1 and all(c.frame is not shot.frame for c in shot.others)
+    shared = distinct_views(Candidate(shot.frame, shot.curves, shot.source, shot.pose), shot.others)
+    assert 1 <= len(shared) < N_FRAMES - 1
     _, _, rec = prepare_run(m, shot, tmp_path, calibration=object(), identity_space=True)
-    assert rec["identity_frames"] == [c.frame.digest for c in shot.others]
-    assert f"and {N_FRAMES - 1} other frame(s)" in rec["identity"]
+    assert rec["identity_frames"] == [c.frame.digest for c in shared]
+    assert f"and {len(shared)} other frame(s)" in rec["identity"]
     write_object(tmp_path / "run.json", rec)
     assert read_run(tmp_path)["identity_frames"] == rec["identity_frames"]
     said = []
@@ -251,6 +259,7 @@ def test_an_identity_in_the_space_is_shared_by_the_frames_looked_at(small_expres
                 progress=lambda e: said.append(e.get("message", "")))
     assert any(t.startswith("reusing") and "identity" in t for t in said), said
     said.clear()
-    _, _, fewer = prepare_run(m, replace(shot, others=shot.others[:2]), tmp_path, calibration=object(),
-                              identity_space=True, progress=lambda e: said.append(e.get("message", "")))
-    assert not any(t.startswith("reusing") for t in said) and "and 2 other frame(s)" in fewer["identity"]
+    _, _, alone = prepare_run(m, replace(shot, others=()), tmp_path, calibration=object(), identity_space=True,
+                              progress=lambda e: said.append(e.get("message", "")))
+    assert not any(t.startswith("reusing") for t in said) and "other frame" not in alone["identity"]
+    assert "identity_frames" not in alone

@@ -64,17 +64,18 @@ SILHOUETTE_WEIGHT = 0.3      # with this weight on their squared residuals
 @dataclass
 class IdentityFit:
     """displacement (V,3) m of the neutral (the face-shape space, the proportions and the field
-    together); rms_before / rms_after px of all the curves on the fitting frame; proportions
+    together); rms_before / rms_after px of all the curves on the fitting frames; proportions
     (4,): (a, b, t, v) of the module's docstring; max_mm: the field's largest vertex
     displacement beyond the space and the proportions; coefficients (K,): the face-shape
     space's (``morph.identity_space``), in standard deviations (empty where the model has
-    no space)."""
+    no space); views: how many frames it was fitted on."""
     displacement: np.ndarray
     rms_before: float
     rms_after: float
     max_mm: float
     proportions: np.ndarray
     coefficients: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    views: int = 1
 
     def describe(self):
         a, b = self.proportions[:2]
@@ -82,8 +83,9 @@ class IdentityFit:
                  f"(largest c{int(np.argmax(np.abs(self.coefficients)))} "
                  f"{self.coefficients[np.argmax(np.abs(self.coefficients))]:+.2f}), "
                  if len(self.coefficients) else "")
-        return (f"identity from the curves: curve RMS {self.rms_before:.2f} -> {self.rms_after:.2f} px on the "
-                f"fitting frame; {space}face width x{np.exp(a):.3f}, height x{np.exp(b):.3f}, then moved up to "
+        frames = "the fitting frame" if self.views == 1 else f"the {self.views} fitting frames"
+        return (f"identity from the curves: curve RMS {self.rms_before:.2f} -> {self.rms_after:.2f} px on "
+                f"{frames}; {space}face width x{np.exp(a):.3f}, height x{np.exp(b):.3f}, then moved up to "
                 f"{self.max_mm:.1f} mm")
 
 
@@ -203,7 +205,7 @@ def fit_identity_views(model, views, iterations=6, length=IDENTITY_LENGTH, silho
         d = _field(field_data, D, reg, V, iterations)
     rms = lambda r: rms_px({"all": r})         # noqa: E731
     return IdentityFit(D + d, rms(r0), rms(every(D + d)[0]),
-                       float(np.linalg.norm(d, axis=1).max() * 1e3), q, coef)
+                       float(np.linalg.norm(d, axis=1).max() * 1e3), q, coef, len(views))
 
 
 def _view_terms(model, sm, view, length=IDENTITY_LENGTH):

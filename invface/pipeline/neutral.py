@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..errors import InvfaceError
 from .plates import DETECTOR, _say
 
@@ -11,6 +13,7 @@ from .plates import DETECTOR, _say
 # how much a shut eye counts against a calibration candidate, in the score's units (a weight
 # of 1): the albedo under shut lids is the lids', and the identity's eye curves are a slit
 EYES_SHUT_COST = 2.0
+MIN_VIEW_ANGLE = 0.1    # rad: frames whose heads turn less than this from each other are one view (distinct_views)
 
 
 def neutral_score(pose, peer=None):
@@ -43,8 +46,8 @@ def pick_neutral(model, clip, candidates=8, lam=None, progress=None, face=0, ove
     in which a face was found, in clip order)."""
     from .plates import find_curves, pose_from_curves
     n = len(clip)
-    k = min(candidates, n)                          # a clip shorter than that: every frame
-    positions = sorted({round(i * (n - 1) / max(k - 1, 1)) for i in range(k)})
+    looked = min(candidates, n)                     # a clip shorter than that: every frame
+    positions = sorted({round(i * (n - 1) / max(looked - 1, 1)) for i in range(looked)})
     best, seen = None, []
     for pos in positions:
         frame = next(clip.frames(pos, pos + 1))
@@ -66,6 +69,26 @@ def pick_neutral(model, clip, candidates=8, lam=None, progress=None, face=0, ove
     why = (f"the most neutral-looking of {len(seen)} frames spread over {over} (expression {score:.2f}: "
            + ", ".join(f"{k} {v:.2f}" for k, v in parts.items()) + ")")
     return chosen, why, seen
+
+
+def distinct_views(chosen, others, angle=MIN_VIEW_ANGLE):
+    """The Candidates among ``others`` that show the head from another side: in their order,
+    each kept where its head rotation differs from the ``chosen`` Candidate's and from every
+    one kept before by at least ``angle`` rad. A frame seen from the same side adds no view of
+    the depth, only its expression, which an identity shared with it takes up."""
+    from ..model.rig import euler_xyz
+    kept, seen = [], [euler_xyz(np.asarray(chosen.pose.rotation, float))]
+    for c in others:
+        R = euler_xyz(np.asarray(c.pose.rotation, float))
+        if all(_angle(R, S) >= angle for S in seen):
+            kept.append(c)
+            seen.append(R)
+    return kept
+
+
+def _angle(R, S):
+    """The angle (rad) of the rotation between R and S (3,3)."""
+    return float(np.arccos(np.clip((np.trace(R.T @ S) - 1) / 2, -1.0, 1.0)))
 
 
 def _view(model, candidate, space):

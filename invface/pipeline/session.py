@@ -71,7 +71,8 @@ def prepare_run(model, shot, out, calibration=None, identity=True, restart=False
     out/actor.npz, or that file is reused when the run being resumed made it from the same
     frames; the model is then read back from it, as a resumed run reads it; ``identity_space``:
     the adaptation starts in the face-shape space and is shared by the shot's other frames
-    (``neutral.actor_identity``; run.json's identity_frames). Without a given
+    that show the head from another side (``neutral.actor_identity``, ``neutral.distinct_views``;
+    run.json's identity_frames). Without a given
     ``calibration``, out/calib.npz is reused likewise or made by ``calibrate(model, plate,
     path, curves, source)`` (default: ``plates.auto_calibrate`` and save). Returns (model,
     Calibration or PlateCalibration, {run.json keys})."""
@@ -86,8 +87,9 @@ def prepare_run(model, shot, out, calibration=None, identity=True, restart=False
     mine = {"identity_from": frame.digest if identity else None}
     if identity_space:
         mine["identity_space"] = True
-        if identity and shot.others:
-            mine["identity_frames"] = [c.frame.digest for c in shot.others]
+        shared = _views(shot) if identity else []
+        if shared:
+            mine["identity_frames"] = [c.frame.digest for c in shared]
     if calibration is None:
         mine["calibrated_on"] = frame.digest
     if earlier_fits(out) and any(before.get(k) != v for k, v in mine.items()) and not restart:
@@ -116,7 +118,7 @@ def _identity(model, shot, out, before, lam, progress, space=False):
     from ..model.facemodel import FaceModel
     from .neutral import actor_identity
     frame, actor = shot.frame, out / "actor.npz"
-    others = list(shot.others) if space else []
+    others = _views(shot) if space else []
     same = (before.get("identity_from") == frame.digest and before.get("identity_space", False) == space
             and before.get("identity_frames", []) == [c.frame.digest for c in others])
     if actor.is_file() and same:
@@ -139,6 +141,15 @@ def _identity(model, shot, out, before, lam, progress, space=False):
                 if adapted is not model else
                 f"The model is used as it is: the identity fit on {names} moved it too far ({fit.describe()})")
     return FaceModel.load(actor), said           # as a resumed run reads it: the same bytes, the same run hash
+
+
+def _views(shot):
+    """The shot's other frames an identity in the face-shape space shares: those that show the
+    head from another side than the shot frame and each other (``neutral.distinct_views``)."""
+    from .neutral import Candidate, distinct_views
+    if not shot.others or shot.pose is None:
+        return []
+    return distinct_views(Candidate(shot.frame, shot.curves, shot.source, shot.pose), shot.others)
 
 
 def _calibrate_and_save(model, plate, path, curves, source):
