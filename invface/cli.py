@@ -719,8 +719,9 @@ def _add_fit_plate(sub):
     fp.add_argument("--identity-space", action="store_true",
                     help="start the actor's identity in the face-shape space (ICT-FaceKit's 20 identity shapes, "
                          "with the detector's own offsets taken off detected curves), then the proportions and "
-                         "the field; a trial: from one photo it does not yet beat the built-in head in 3D on "
-                         "faces not tuned on (bench/identity_3d.py)")
+                         "the field; in a clip, shared by the frames looked at for the calibration that show the "
+                         "head from another side (0.1 rad apart); a trial: see bench/identity_3d.py for how near "
+                         "the true face it comes in 3D")
     fp.add_argument("--restart", "--force", dest="restart", action="store_true",
                     help="start over: replace an earlier run's fits in the output folder (a rerun with the same "
                          "inputs otherwise resumes it, skipping the frames already fitted)")
