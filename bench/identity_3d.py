@@ -11,11 +11,12 @@ identity-adapted head comes to the true face.
    light). Its curves come from the landmark detector on the render (``--curves detector``,
    as a user's photo) or are projected from the actor (``truth``).
 3. The built-in head is posed by Eq. 15 (``pipeline.plates.pose_from_curves``) and its identity
-   fitted (``fit.identity.fit_identity``) as ``fit-plate`` fits it: the face-shape space
-   (``morph.identity_space``) with the proportions, then the field, the detector's own offsets
+   fitted (``fit.identity.fit_identity``): the face-shape space (``morph.identity_space``)
+   with the proportions, then the field, the detector's own offsets
    (``fit.identity.detector_bias``) taken off detected curves ("space"); without the space
-   (the proportions and the field alone, "no space"); and with the space but without the
-   detector's offsets ("space, no bias").
+   (the proportions and the field alone, "no space", as ``fit-plate`` fits it by default);
+   and with the space but without the detector's offsets ("space, no bias", as
+   ``fit-plate --identity-space`` fits it).
    A face whose build stops (``BuildFailed``), or whose built actor has its eye or mouth
    corners, nose or chin more than 10 mm from the mix's annotated ones (ICT's Multi-PIE
    points) is a failed build, left out and counted.
@@ -25,7 +26,8 @@ identity-adapted head comes to the true face.
    fitted once, shared by the frames (``fit.identity.fit_identity_views``): "clip" with the
    detector's offsets taken off each frame, "clip_no_bias" without; and shared by the frames
    ``fit-plate --identity-space`` would share it over, the most neutral-looking and those that
-   show the head from another side ("clip_fit_plate", "clip_fit_plate_no_bias"). Frames where
+   show the head from another side ("clip_fit_plate", and "clip_fit_plate_no_bias", as
+   ``fit-plate`` fits it). Frames where
    the detector finds no face are left out and counted. The frames' views are kept in
    OUT/views, so a rerun only fits.
 4. The error: over the true face (skin within 6 cm of its nose tip), after a similarity
@@ -58,7 +60,7 @@ from invface.mesh.closest import closest_points
 from invface.morph.build import build_model
 from invface.morph.orient import kabsch
 from invface.model.controls import FitVector
-from invface.pipeline.neutral import Candidate, _detect_curves, distinct_views, neutral_score
+from invface.pipeline.neutral import Candidate, distinct_views, neutral_score
 from invface.pipeline.plates import DETECTOR, find_curves, pose_from_curves
 from invface.render.plates import load_plate
 from real_scans import ICT_POINTS
@@ -67,6 +69,15 @@ ICT = SHARED / "ict-facekit"
 REACH = 0.06          # m: the face measured, around the nose tip
 BUILT_MM = 10.0       # a build whose eye and mouth corners, nose or chin lie further than this from the
                       # annotated ones is a failed build (the morph, issue 62): its face is left out
+
+
+def _detect_curves(image_srgb):
+    """The detector's curves on an sRGB image, or None where it finds no face."""
+    from invface.fit.landmarks import detect_curves
+    try:
+        return detect_curves(image_srgb, "the model's own render")
+    except InvfaceError:
+        return None
 
 
 def face_error_mm(truth, neutral, triangles):

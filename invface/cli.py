@@ -717,9 +717,8 @@ def _add_fit_plate(sub):
                          "proportions and a smooth field, from the curves of the photo or of a sequence's "
                          "calibration frame, written to DIR/actor.npz)")
     fp.add_argument("--identity-space", action="store_true",
-                    help="start the actor's identity in the face-shape space (ICT-FaceKit's 20 identity shapes, "
-                         "with the detector's own offsets taken off detected curves), then the proportions and "
-                         "the field; in a clip, shared by the frames looked at for the calibration that show the "
+                    help="start the actor's identity in the face-shape space (ICT-FaceKit's 20 identity shapes), "
+                         "then the proportions and the field; in a clip, shared by the frames looked at for the calibration that show the "
                          "head from another side (0.1 rad apart); a trial: see bench/identity_3d.py for how near "
                          "the true face it comes in 3D")
     fp.add_argument("--restart", "--force", dest="restart", action="store_true",

@@ -118,8 +118,8 @@ def detector_bias(model, camera, curves, p, rotation, translation, detect):
     render of the model at controls p (P,), posed by rotation (3,) rad and translation (3,) m,
     through ``camera`` (studio light, the model's skin albedo): on a face the model fits
     exactly, what the detector's habits add (where its face oval and nose base lie against the
-    model's outline and nose). Without it the face-shape space takes the habits for a face.
-    ``detect(image_srgb)`` -> {curve: (n,2) px} or None (no face);
+    model's outline and nose), which the face-shape space could take for a face
+    (``bench/identity_3d.py`` fits with and without them). ``detect(image_srgb)`` -> {curve: (n,2) px} or None (no face);
     the curves of ``curves`` it does not give have no bias."""
     from ..io.images import linear_to_srgb
     from ..render.synthetic import render_plate, skin_albedo, studio_light

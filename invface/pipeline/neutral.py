@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InvfaceError
-from .plates import DETECTOR, _say
+from .plates import _say
 
 
 # how much a shut eye counts against a calibration candidate, in the score's units (a weight
@@ -91,24 +91,11 @@ def _angle(R, S):
     return float(np.arccos(np.clip((np.trace(R.T @ S) - 1) / 2, -1.0, 1.0)))
 
 
-def _view(model, candidate, space):
-    """The IdentityView of a Candidate: with ``space``, the detector's own offsets
-    (``fit.identity.detector_bias``, on a render of the model at its fitted pose) taken off
-    curves the detector found."""
-    from ..fit.identity import IdentityView, detector_bias
-    c, pose, camera = candidate, candidate.pose, candidate.frame.plate.camera
-    bias = (detector_bias(model, camera, c.curves, pose.p, pose.rotation, pose.translation, _detect_curves)
-            if space and c.source == DETECTOR else None)
-    return IdentityView(camera, c.curves, pose.p, pose.rotation, pose.translation, bias)
-
-
-def _detect_curves(image_srgb):
-    """The detector's curves on an sRGB image, or None where it finds no face."""
-    from ..fit.landmarks import detect_curves
-    try:
-        return detect_curves(image_srgb, "the model's own render")
-    except InvfaceError:
-        return None
+def _view(candidate):
+    """The IdentityView of a Candidate: its camera, curves, controls and pose."""
+    from ..fit.identity import IdentityView
+    pose = candidate.pose
+    return IdentityView(candidate.frame.plate.camera, candidate.curves, pose.p, pose.rotation, pose.translation)
 
 
 def actor_identity(model, frame, curves, lam=None, pose=None, progress=None, source="", space=False, others=()):
@@ -117,9 +104,10 @@ def actor_identity(model, frame, curves, lam=None, pose=None, progress=None, sou
     here), then a smooth neutral correction (``fit.identity.fit_identity_views``) carried into
     the anatomy (``morph.build.adapt_identity``). With ``space`` the correction starts in the
     face-shape space and is shared with the frames ``others`` (Candidates: each with its own
-    controls and pose; several head poses pin the depth one view cannot), and curves whose
-    source is the landmark detector (``plates.DETECTOR``) first lose the detector's own
-    offsets from the model's curves (``fit.identity.detector_bias``). Returns (FaceModel,
+    controls and pose; several head poses pin the depth one view cannot). The detector's own
+    offsets from the model's curves (``fit.identity.detector_bias``) are not taken off: on
+    faces with a 3D truth they took the fitted face further from it (``bench/identity_3d.py``).
+    Returns (FaceModel,
     IdentityFit); the model is ``model`` itself when the correction is larger than
     ``IDENTITY_MAX_MM`` (not an identity: a wrong frame or wrong curves), with a message saying
     so."""
@@ -128,11 +116,7 @@ def actor_identity(model, frame, curves, lam=None, pose=None, progress=None, sou
     from .plates import pose_from_curves
     pose = pose or pose_from_curves(model, frame.plate, curves, lam)
     shots = [Candidate(frame, curves, source, pose)] + (list(others) if space else [])
-    if space:
-        _say(progress, message=f"the actor's identity shared by {len(shots)} frame(s)"
-                               + (", the detector's own offsets taken off each" if any(
-                                   c.source == DETECTOR for c in shots) else ""))
-    fit = fit_identity_views(model, [_view(model, c, space) for c in shots], space=space)
+    fit = fit_identity_views(model, [_view(c) for c in shots], space=space)
     if fit.max_mm > IDENTITY_MAX_MM:
         _say(progress, message=f"{frame.name}: {fit.describe()}: more than {IDENTITY_MAX_MM:g} mm is no identity "
                                "correction; the model is used as it is")
