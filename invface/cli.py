@@ -718,9 +718,9 @@ def _add_fit_plate(sub):
                          "calibration frame, written to DIR/actor.npz)")
     fp.add_argument("--identity-space", action="store_true",
                     help="start the actor's identity in the face-shape space (ICT-FaceKit's 20 identity shapes), "
-                         "then the proportions and the field; in a clip, shared by the frames looked at for the calibration that show the "
-                         "head from another side (0.1 rad apart); a trial: see bench/identity_3d.py for how near "
-                         "the true face it comes in 3D")
+                         "then the proportions and the field; in a clip, shared by the frames looked at for the "
+                         "calibration that show the head from another side (0.1 rad apart); a trial: see "
+                         "bench/identity_3d.py for how near the true face it comes in 3D")
     fp.add_argument("--restart", "--force", dest="restart", action="store_true",
                     help="start over: replace an earlier run's fits in the output folder (a rerun with the same "
                          "inputs otherwise resumes it, skipping the frames already fitted)")

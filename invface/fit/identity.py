@@ -1,4 +1,5 @@
-"""The actor's identity from the curves of one plate or of several frames: a smooth correction of the model's neutral.
+"""The actor's identity from the curves of one plate or of several frames: a smooth correction
+of the model's neutral.
 
 A model built from another face (the template, or an actor scanned once) leaves a fixed gap to
 the person in a clip: lid and lip shapes the controls cannot make, since the blendshapes and
@@ -119,8 +120,9 @@ def detector_bias(model, camera, curves, p, rotation, translation, detect):
     through ``camera`` (studio light, the model's skin albedo): on a face the model fits
     exactly, what the detector's habits add (where its face oval and nose base lie against the
     model's outline and nose), which the face-shape space could take for a face
-    (``bench/identity_3d.py`` fits with and without them). ``detect(image_srgb)`` -> {curve: (n,2) px} or None (no face);
-    the curves of ``curves`` it does not give have no bias."""
+    (``bench/identity_3d.py`` fits with and without them). ``detect(image_srgb)`` ->
+    {curve: (n,2) px} or None (no face); the curves of ``curves`` it does not give have no
+    bias."""
     from ..io.images import linear_to_srgb
     from ..render.synthetic import render_plate, skin_albedo, studio_light
     from .curves import CurveObjective
