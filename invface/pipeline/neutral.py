@@ -91,14 +91,14 @@ def _angle(R, S):
     return float(np.arccos(np.clip((np.trace(R.T @ S) - 1) / 2, -1.0, 1.0)))
 
 
-def _view(candidate):
-    """The IdentityView of a Candidate: its camera, curves, controls and pose."""
+def _view(plate, curves, pose):
+    """The IdentityView of a frame's ``plate``, its curves {name: (n,2) px} and its
+    PoseEstimate: the plate's camera, the curves, the controls and the pose."""
     from ..fit.identity import IdentityView
-    pose = candidate.pose
-    return IdentityView(candidate.frame.plate.camera, candidate.curves, pose.p, pose.rotation, pose.translation)
+    return IdentityView(plate.camera, curves, pose.p, pose.rotation, pose.translation)
 
 
-def actor_identity(model, frame, curves, lam=None, pose=None, progress=None, source="", space=False, others=()):
+def actor_identity(model, frame, curves, lam=None, pose=None, progress=None, space=False, others=()):
     """The model adapted to the actor of a shot from one neutral-looking frame's curves
     {name: (n,2) px}: the controls and pose of Eq. 15 (``pose``, a PoseEstimate, or fitted
     here), then a smooth neutral correction (``fit.identity.fit_identity_views``) carried into
@@ -107,16 +107,15 @@ def actor_identity(model, frame, curves, lam=None, pose=None, progress=None, sou
     controls and pose; several head poses pin the depth one view cannot). The detector's own
     offsets from the model's curves (``fit.identity.detector_bias``) are not taken off: on
     faces with a 3D truth they took the fitted face further from it (``bench/identity_3d.py``).
-    Returns (FaceModel,
-    IdentityFit); the model is ``model`` itself when the correction is larger than
-    ``IDENTITY_MAX_MM`` (not an identity: a wrong frame or wrong curves), with a message saying
-    so."""
+    Returns (FaceModel, IdentityFit); the model is ``model`` itself when the correction is
+    larger than ``IDENTITY_MAX_MM`` (not an identity: a wrong frame or wrong curves), with a
+    message saying so."""
     from ..fit.identity import IDENTITY_MAX_MM, fit_identity_views
     from ..morph.build import adapt_identity
     from .plates import pose_from_curves
     pose = pose or pose_from_curves(model, frame.plate, curves, lam)
-    shots = [Candidate(frame, curves, source, pose)] + (list(others) if space else [])
-    fit = fit_identity_views(model, [_view(c) for c in shots], space=space)
+    views = [_view(frame.plate, curves, pose)] + [_view(c.frame.plate, c.curves, c.pose) for c in others if space]
+    fit = fit_identity_views(model, views, space=space)
     if fit.max_mm > IDENTITY_MAX_MM:
         _say(progress, message=f"{frame.name}: {fit.describe()}: more than {IDENTITY_MAX_MM:g} mm is no identity "
                                "correction; the model is used as it is")

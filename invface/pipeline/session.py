@@ -85,18 +85,18 @@ def prepare_run(model, shot, out, calibration=None, identity=True, restart=False
         record["calibration_why"] = shot.why
     before = {} if restart else read_run(out)
     mine = {"identity_from": frame.digest if identity else None}
+    shared = _views(shot) if identity and identity_space else []
     if identity_space:
         mine["identity_space"] = True
-        shared = _views(shot) if identity else []
-        if shared:
-            mine["identity_frames"] = [c.frame.digest for c in shared]
+    if shared:
+        mine["identity_frames"] = [c.frame.digest for c in shared]
     if calibration is None:
         mine["calibrated_on"] = frame.digest
     if earlier_fits(out) and any(before.get(k) != v for k, v in mine.items()) and not restart:
         raise InvfaceError(f"{out}: holds an earlier run's fits; pass --restart to replace them, or "
                            "choose another output folder")           # refused before any work is done
     if identity:
-        model, record["identity"] = _identity(model, shot, out, before, lam, progress, identity_space)
+        model, record["identity"] = _identity(model, shot, out, before, lam, progress, identity_space, shared)
         record["identity_from"] = frame.digest
         record.update({k: v for k, v in mine.items() if k in ("identity_space", "identity_frames")})
     if calibration is None:
@@ -111,14 +111,13 @@ def prepare_run(model, shot, out, calibration=None, identity=True, restart=False
     return model, calibration, record
 
 
-def _identity(model, shot, out, before, lam, progress, space=False):
-    """(the model adapted to the shot frame's face, with ``space`` shared by the shot's other
-    frames, and read back from out/actor.npz, the sentence run.json keeps), reusing the resumed
-    run's actor.npz made from the same frames."""
+def _identity(model, shot, out, before, lam, progress, space=False, others=()):
+    """(the model adapted to the shot frame's face, with ``space`` shared by the Candidates
+    ``others`` (``_views``), and read back from out/actor.npz, the sentence run.json keeps),
+    reusing the resumed run's actor.npz made from the same frames."""
     from ..model.facemodel import FaceModel
     from .neutral import actor_identity
     frame, actor = shot.frame, out / "actor.npz"
-    others = _views(shot) if space else []
     same = (before.get("identity_from") == frame.digest and before.get("identity_space", False) == space
             and before.get("identity_frames", []) == [c.frame.digest for c in others])
     if actor.is_file() and same:
@@ -131,7 +130,7 @@ def _identity(model, shot, out, before, lam, progress, space=False):
                               if others else "")
         _say(progress, message=f"the actor's identity from the curves of {names}")
         adapted, fit = actor_identity(model, frame, shot.curves, lam=lam, pose=shot.pose, progress=progress,
-                                      source=shot.source, space=space, others=others)
+                                      space=space, others=others)
         out.mkdir(parents=True, exist_ok=True)
         adapted.save(actor)
         if adapted is not model:
