@@ -660,7 +660,7 @@ def _add_fit_plate(sub):
                                           "shape from shading (Eq. 16); a folder is a sequence")
     fp.add_argument("plate", help="plate image (EXR, DPX, TIFF, PNG, JPEG, ...), a numbered sequence "
                                   "(shot.####.dpx, shot.%%04d.exr), a video (MP4/MOV/AVI/MKV) or a folder of frames: "
-                                  "a sequence, each frame warm-started from the one before")
+                                  "a sequence, each frame started from the two before it")
     fp.add_argument("--frames", help="frames to fit: FIRST-LAST[xSTEP] in the source's own frame numbers, both ends "
                                      "included as in VFX ranges (e.g. 1001-1072x2), or START:STOP[:STEP] positions "
                                      "(Python slice, end left out, e.g. 0:72:2), or one position; default all")

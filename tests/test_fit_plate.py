@@ -313,6 +313,29 @@ def test_fit_plate_recovers_a_blendshape_plate(small_expressive_model, tmp_path,
     assert set(by_region) == {"mouth", "opening", "eyes"} and f"{by_region['mouth']:.4f}" in page
 
 
+def test_a_sequence_frame_starts_its_shading_where_the_frame_before_left_its_curves(small_expressive_model,
+                                                                                 monkeypatch):
+    """A start that is a PlateFit carries its shading correction (its controls less its curve
+    stage's) onto the next frame's curve answer, within the box; a first frame starts its
+    shading from its curve answer."""
+    import invface.fit.plate as fp
+    m = small_expressive_model
+    cam = _cam()
+    p, (x, xr) = _truth(m)
+    g, a = studio_light(), skin_albedo(m)
+    image, _ = render_plate(m, x, cam, g, a, ROT, TR, spp=16)
+    curves = {n: projection_jacobian(cam, curve_points(m, n, xr))[0] for n in PLATE_CURVES}
+    plate, cal = Plate(image=image, camera=cam, path="synthetic"), Calibration(gamma=g, albedo=a)
+    starts, fit_shading = [], fp.fit_shading
+    monkeypatch.setattr(fp, "fit_shading", lambda *a, **k: starts.append(k["p0"]) or fit_shading(*a, **k))
+    first = fit_plate(m, plate, cal, curves, max_iter_shading=3)
+    assert np.array_equal(starts[0], first.curve_p) and not np.allclose(first.p, first.curve_p, atol=1e-3)
+    second = fit_plate(m, plate, cal, curves, start=first, max_iter_shading=1)
+    vec = FitVector.of(m)
+    lo, hi = (b[vec.controls] for b in vec.bounds())
+    assert np.allclose(starts[len(starts) - 2], np.clip(second.curve_p + first.p - first.curve_p, lo, hi))
+
+
 def test_curve_regions_and_their_image_rms():
     from invface.fit.regions import curve_regions, region_rms
     curves = {"lip_outer_upper": [(10, 30), (30, 20), (50, 30)], "lip_outer_lower": [(10, 30), (30, 40), (50, 30)],
@@ -349,6 +372,11 @@ def test_fit_plate_with_the_simulation_recovers_a_simulation_plate(small_express
     assert radii[-2:] == [COARSE_RADIUS, SIMULATION_RADIUS] and SIMULATION_RADIUS > 1
     sim = [h["cost"] for h in fit.history if h["stage"] == "shading-simulation"]
     assert min(sim) <= sim[0] and fit.activations and max(fit.activations.values()) > 0.05
+    # the record counts the stage's accepted steps and the simulation's solves behind them
+    work = fit.summary()["work"]
+    accepted = sum(bool(h.get("accepted")) for h in fit.history if h["stage"] == "shading-simulation")
+    assert work["steps"]["shading-simulation"] == accepted >= 1
+    assert work["solves"] > accepted and work["newton_iterations"] >= work["solves"]
     _, shape = vertex_errors(m, fit, xr, {"rotation": ROT, "translation": TR})
     assert np.median(shape) < 0.5e-3
 

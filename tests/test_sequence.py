@@ -145,6 +145,43 @@ def test_temporal_term_lowers_jitter_without_losing_the_curves(small_expressive_
     assert res[1.0][1] < res[0.0][1] + 0.3, res
 
 
+def test_a_frame_starts_where_the_two_before_it_point():
+    """Constant velocity per frame from the last two unflagged frames, clamped to the box; no
+    prediction from frames out of order or across a long gap."""
+    from invface.model.controls import FitVector
+    from invface.pipeline.frames import PREDICT_GAP, predict
+    vec = FitVector(["a", "b"])
+    z0, z1 = vec.pack(weights=[0.2, 0.9], rotation=[0.0, 0.1, 0.0]), vec.pack(weights=[0.3, 0.95],
+                                                                               rotation=[0.0, 0.2, 0.0])
+    z = predict(vec, (4, z0), (6, z1), 8)
+    assert np.allclose(z[vec.weights], [0.4, 1.0]) and np.allclose(z[vec.rotation], [0.0, 0.3, 0.0])
+    assert np.allclose(predict(vec, (4, z0), (6, z1), 7)[vec.rotation], [0.0, 0.25, 0.0])
+    assert predict(vec, (6, z1), (4, z0), 8) is None and predict(vec, (4, z0), (6, z1), 6) is None
+    assert predict(vec, (4, z0), (6, z1), 6 + 2 * PREDICT_GAP + 1) is None
+
+
+def test_each_frame_after_two_starts_from_their_prediction(small_expressive_model, clip, monkeypatch):
+    """In a sequence, the third frame on starts from the prediction of the two before it (its
+    temporal term still pulls towards the last one)."""
+    import invface.fit.plate as fp
+    from invface.fit.calibrate import Calibration
+    from invface.model.controls import FitVector
+    from invface.pipeline import fit_sequence
+    root, frames, _ = clip
+    calls, fit_plate = [], fp.fit_plate
+    monkeypatch.setattr(fp, "fit_plate", lambda *a, **k: calls.append(k) or fit_plate(*a, **k))
+    rows = fit_sequence(small_expressive_model, frames, Calibration.load(root / "calib.npz"), select="0:4",
+                        shading=False)
+    vec = FitVector.of(small_expressive_model)
+    fits = [r["fit"]["blendshape"] for r in rows]
+    z = [vec.pack(f.p, f.rotation, f.translation) for f in fits]
+    assert calls[0]["guess"] is None and calls[1]["guess"] is None and calls[1]["start"] is fits[0]
+    lo, hi = vec.bounds()
+    for i in (2, 3):
+        assert calls[i]["start"] is fits[i - 1]
+        assert np.allclose(calls[i]["guess"], np.clip(2 * z[i - 1] - z[i - 2], lo, hi))
+
+
 def test_two_process_local_cluster_matches_the_single_process_run(small_expressive_model, clip, tmp_path):
     """--workers 2 (a distributed.LocalCluster) fits the same frames: the chunks' first
     frames are refitted from the chunk before, and the answers agree with one process."""

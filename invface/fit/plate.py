@@ -71,6 +71,8 @@ class PlateFit(NamedControls):
     status: str = ""
     image_rms_by_region: dict = field(default_factory=dict)    # ``fit.regions.region_rms``
     iris_px: dict = field(default_factory=dict)     # {iris curve: (1,) px, model pupil to plate iris}
+    curve_p: np.ndarray = None                      # the curve stage's controls (K+6,): Eq. 16's w^
+    work: dict = field(default_factory=dict)        # ``_work``: accepted steps by stage, the simulation's solves
 
     @property
     def curve_rms_px(self):
@@ -90,7 +92,7 @@ class PlateFit(NamedControls):
                 "curve_rms_px_by_curve": {k: rms_px({k: v}) for k, v in sorted(self.residual_px.items())},
                 "iris_px": {k: float(v[0]) for k, v in sorted(self.iris_px.items())},
                 "image_rms": self.image_rms, "image_rms_by_region": self.image_rms_by_region,
-                "lip_volume_change": self.lip_volume_change, "seconds": self.seconds,
+                "lip_volume_change": self.lip_volume_change, "seconds": self.seconds, "work": self.work,
                 "history": self.history}
 
 
@@ -106,7 +108,7 @@ def check_plate(plate, path=""):
         raise ImageError(f"{name}: the plate is one flat colour: no face to fit")
 
 
-def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, shading=True,
+def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, guess=None, shading=True,
               max_iter_curves=200, max_iter_shading=25, spp=8,
               lam_curves=EQ15_LAMBDA_1, solver="dogleg", temporal=0.0, temporal_shading=EQ16_TEMPORAL,
               progress=None):
@@ -115,7 +117,11 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     curves: {name: (n, 2) px} plate curves; kind: "blendshape" or "simulation"; start: the
     previous frame's PlateFit (sequence mode: its controls and pose start this frame; without
     one the calibration's pose starts it, and the curve stage's pose pass holds the head's
-    translation near it: ``fit.curves.pose_anchor``);
+    translation near it: ``fit.curves.pose_anchor``; a start that is a PlateFit also carries
+    its shading correction over: the shading stages start from this frame's curve answer plus
+    the start's move from its own, within the controls' box); guess: the fit vector z (size,)
+    the curve stage starts from instead of the start's (a sequence's prediction), the
+    temporal term still pulling towards the start;
     lam_curves: lambda_1 of Eq. 15 (px^2 per unit weight^2); solver: "dogleg" or "lbfgs" for
     the shading stages (``fit.shading.fit_shading``); temporal: with a ``start``, the weight of
     the temporal term of the curve stage (``fit_curves``); the shading stages take it times
@@ -129,16 +135,24 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
     cam = plate.camera
     say = progress or (lambda h: None)
     t0 = time.perf_counter()
-    p0 = None if start is None else start.p
-    rot = calibration.rotation if start is None else start.rotation
-    tr = calibration.translation if start is None else start.translation
-    previous = None if start is None else FitVector.of(model).pack(start.p, start.rotation, start.translation)
+    counts = _solver_counts(model, kind)
+    vec = FitVector.of(model)
+    previous = None if start is None else vec.pack(start.p, start.rotation, start.translation)
+    if guess is not None:
+        p0, rot, tr = vec.unpack(guess)
+    elif start is not None:
+        p0, rot, tr = start.p, start.rotation, start.translation
+    else:
+        p0, rot, tr = None, calibration.rotation, calibration.translation
     cf = fit_curves(model, cam, curves, kind="blendshape", lam=lam_curves, p0=p0, rotation=rot,
                     translation=tr, max_iter=max_iter_curves, previous=previous, temporal=temporal,
                     anchored=start is None, progress=lambda h: say(dict(h, stage="curves")))
     history = [dict(h, stage="curves") for h in cf.history]
     seconds = {"curves": time.perf_counter() - t0}
     p, rot, tr, status = cf.p, cf.rotation, cf.translation, f"curves: {cf.status}"
+    if getattr(start, "curve_p", None) is not None:
+        lo, hi = vec.bounds()
+        p = np.clip(cf.p + start.p - start.curve_p, lo[vec.controls], hi[vec.controls])
     for stage, skind, ftol, level, iters, radius in _shading_stages(kind, max_iter_shading) if shading else []:
         t1 = time.perf_counter()
         shade = dict(kind=skind, curves=curves, mask=plate.mask, max_iter=iters, spp=spp,
@@ -160,7 +174,25 @@ def fit_plate(model, plate, calibration, curves, kind="blendshape", start=None, 
         p, rot, tr = sf.p, sf.rotation, sf.translation
         status += f"; {stage}: {sf.status}"
     return _plate_fit(model, kind, plate, calibration, curves, p, rot, tr, spp,
-                      dict(history=history, seconds=seconds, status=status), t0)
+                      dict(history=history, seconds=seconds, status=status,
+                           work=_work(model, kind, history, counts), curve_p=cf.p), t0)
+
+
+def _solver_counts(model, kind):
+    """{"solves", "newton_iterations"} the simulation has done so far ({} for the rig)."""
+    counts = getattr(model.surface_model(kind), "counts", None) if kind == "simulation" else None
+    return dict(counts or {})
+
+
+def _work(model, kind, history, before):
+    """What a fit did: {"steps": {stage: accepted steps}} and, for the simulation, the
+    quasistatic solves and Newton iterations it took (``before``: ``_solver_counts`` at its
+    start)."""
+    steps = {}
+    for h in history:
+        steps[h["stage"]] = steps.get(h["stage"], 0) + bool(h.get("accepted"))
+    after = _solver_counts(model, kind)
+    return {"steps": steps, **{k: v - before.get(k, 0) for k, v in after.items()}}
 
 
 def _shading_stages(kind, n):
@@ -206,7 +238,8 @@ def _plate_fit(model, kind, plate, calibration, curves, p, rot, tr, spp, record,
                     history=record["history"], seconds=seconds, activations=acts,
                     lip_volume_change=lip_volume_change(model, p, X), status=record["status"],
                     image_rms_by_region=region_rms(render, plate.image, curves),
-                    iris_px=final.iris_px(vec.pack(p, rot, tr), xr))
+                    iris_px=final.iris_px(vec.pack(p, rot, tr), xr), work=record.get("work", {}),
+                    curve_p=record.get("curve_p"))
 
 
 def write_plate_fit(folder, model, fit, plate, curves, extra=None, vertex_error=None):

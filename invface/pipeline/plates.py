@@ -406,13 +406,15 @@ class FrameFit:
         return write_report(folder, title=self.title or f"invface plate fit: {self.name}", quick=quick)
 
 
-def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), starts=None, iterations=25,
-              shading=True, lam_curves=None, solver="dogleg", notes=(), title=None, progress=None,
+def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), starts=None, guesses=None,
+              iterations=25, shading=True, lam_curves=None, solver="dogleg", notes=(), title=None, progress=None,
               on_kind=None, source=None, camera=None, detector=None, temporal=0.0, temporal_shading=EQ16_TEMPORAL,
               face=0, crop=False):
     """Fit one plate with each model kind (paper 000, Eq. 15 then 16). plate: a Plate or a path;
     calibration: a Calibration or PlateCalibration of this model and camera set-up; curves:
-    see ``find_curves`` (source: where given curves came from, for the report); starts: {kind: PlateFit} of the previous frame (warm start);
+    see ``find_curves`` (source: where given curves came from, for the report); starts:
+    {kind: PlateFit} of the previous frame (warm start); guesses: {kind: z (size,)} where a
+    kind's fit starts instead (``frames.predict``);
     lam_curves: lambda_1 of Eq. 15 (default: scaled with the face, ``curve_lambda``);
     on_kind(frame, kind): called as each kind finishes (to write it at once); camera: for a
     plate path (see ``render.plates.load_plate``); detector, face, crop: see ``find_curves``; temporal: the
@@ -441,6 +443,7 @@ def fit_frame(model, plate, calibration, curves=None, kinds=("blendshape",), sta
             _say(progress, **dict(h, kind=kind, frame=frame.name))
         try:
             fit = fit_plate(model, plate, calibration, curves, kind=kind, start=(starts or {}).get(kind),
+                            guess=(guesses or {}).get(kind),
                             shading=shading, max_iter_shading=iterations, lam_curves=lam, solver=solver,
                             temporal=temporal * face_scale(curves)[0], temporal_shading=temporal_shading,
                             progress=log)

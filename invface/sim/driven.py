@@ -70,6 +70,7 @@ class DrivenSimulation:
         # near it starts from the first-order prediction when that is lower in energy
         self.predictor = None
         self.solved = set()        # parameter vectors (bytes) solved before: see result_at
+        self.counts = {"solves": 0, "newton_iterations": 0}    # work done so far, for the fits' records
         self.start = "last"        # where new solves start: see result_at
 
     def split(self, p):
@@ -92,6 +93,8 @@ class DrivenSimulation:
         res = self.sim.solve(state.activations, jaw, tracks=self.tracks.springs(state),
                              warm=warm.sim if warm is not None else None, guess=guess, **kw)
         out = DrivenResult(np.asarray(p, float).copy(), state, res)
+        self.counts["solves"] += 1
+        self.counts["newton_iterations"] += int(res.iterations)
         self.last = out
         self.solved.add(out.p.tobytes())
         return out
