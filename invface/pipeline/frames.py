@@ -60,9 +60,10 @@ def fit_frames(model, clip, calibration, out=None, kinds=("blendshape",), start=
                on_frame=None, **options):
     """Fit the clip's frames at positions [start, stop) in order, each warm-started from the
     last unflagged one (``starts``: {kind: start} for the first; a record from ``start_from``
-    or a PlateFit) and, after two unflagged frames, from their ``predict``ion, writing each kind of each frame to out/<frame>/<kind>/ (out/ for a clip
-    of one frame) as it finishes with its ``input_hash``; with ``skip`` frames already
-    finished from the same inputs are read, not fitted; ``record``: more keys for fit.json;
+    or a PlateFit) and, after two unflagged frames, from their ``predict``ion, writing each
+    kind of each frame to out/<frame>/<kind>/ (out/ for a clip of one frame) as it finishes
+    with its ``input_hash``; with ``skip`` frames already finished from the same inputs are
+    read, not fitted; ``record``: more keys for fit.json;
     ``keep``: each summary's "fit" holds the frame's FrameFit (None when skipped).
     A frame of a longer clip that cannot be fitted at all (no face found, no kind finished)
     is reported in its summary's "error" and the run goes on. A sequence frame's page has the
