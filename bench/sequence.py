@@ -35,6 +35,13 @@ from invface.pipeline.runs import run_hash
 from invface.render.synthetic import skin_albedo, studio_light
 
 
+def steps(recs):
+    """Mean accepted steps a frame of each stage, from the frames' histories."""
+    stages = dict.fromkeys(h["stage"] for r in recs for h in r.get("history", []))
+    accepted = lambda r, s: sum(bool(h.get("accepted")) for h in r["history"] if h["stage"] == s)
+    return ", ".join(f"{s} {np.mean([accepted(r, s) for r in recs]):.1f}" for s in stages)
+
+
 def controls(recs):
     return np.array([list(r["weights"].values()) + r["jaw"] + r["rotation"] + r["translation"] for r in recs])
 
@@ -73,7 +80,8 @@ def main():
                       f"{np.median([e['shape_median_mm'] for e in errs]):.3f} mm (worst frame "
                       f"{max(e['shape_median_mm'] for e in errs):.3f}), posed "
                       f"{np.median([e['median_mm'] for e in errs]):.3f} mm; curve RMS median "
-                      f"{np.median([r['curve_rms_px'] for r in recs[workers, t]]):.2f} px", flush=True)
+                      f"{np.median([r['curve_rms_px'] for r in recs[workers, t]]):.2f} px; accepted steps a frame: "
+                      f"{steps(recs[workers, t])}", flush=True)
         truth = [{"_name": f"{i}", "frame": i, "time": i / 24,
                   "weights": {n: w.get(n, 0.0) for n in model.blendshape_names}, "jaw": list(j), "rotation": list(r),
                   "translation": list(tr), "flagged": ""}
