@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from _common import add_json_option, shared, write_json
+from invface.fit.plate import accepted_steps
 from invface.pipeline.outputs import curve_rows, jitter, sequence_records
 
 KINDS = {"both": ("blendshape", "simulation"), "blendshape": ("blendshape",), "simulation": ("simulation",)}
@@ -49,13 +50,14 @@ def per_kind(records):
     med = lambda values: float(np.median(values)) if len(values) else float("nan")
     mean = lambda values: float(np.mean(values)) if len(values) else float("nan")
     stages = sorted({s for r in records for s in r.get("seconds", {})})
-    steps = sorted({h["stage"] for r in records for h in r.get("history", [])})
+    per_frame = [accepted_steps(r.get("history", [])) for r in records]     # runs made before ``work`` too
+    steps = sorted({s for f in per_frame for s in f})
     work = lambda key: [r["work"][key] for r in records if key in r.get("work", {})]
     lips = [r["lip_volume_change"] for r in records]
     return {
         "frames": len(records),
         "seconds_per_frame": {s: mean([r["seconds"].get(s, 0.0) for r in records]) for s in stages},
-        "steps_per_frame": {s: mean([_accepted(r, s) for r in records]) for s in steps},
+        "steps_per_frame": {s: mean([f.get(s, 0) for f in per_frame]) for s in steps},
         "solves_per_frame": mean(work("solves")),
         "newton_iterations_per_frame": mean(work("newton_iterations")),
         "curve_rms_px": med([r["curve_rms_px"] for r in records]),
@@ -65,12 +67,6 @@ def per_kind(records):
         "jitter": jitter(curve_rows(records)),
         "flagged": int(sum(bool(r.get("flagged")) for r in records)),
     }
-
-
-def _accepted(record, stage):
-    """Accepted steps of one stage in a fit.json's history (runs made before ``work`` was
-    recorded have the history too)."""
-    return sum(bool(h.get("accepted")) for h in record.get("history", []) if h["stage"] == stage)
 
 
 def main():

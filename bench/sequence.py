@@ -27,6 +27,7 @@ import numpy as np
 import invface
 from invface.fit.calibrate import Calibration
 from invface.fit.lambdas import TEMPORAL_LAMBDA
+from invface.fit.plate import accepted_steps
 from invface.fit.samples import clip_controls, write_sample_clip
 from invface.pipeline.clips import open_clip
 from invface.pipeline.distributed import fit_sequence_distributed
@@ -37,9 +38,9 @@ from invface.render.synthetic import skin_albedo, studio_light
 
 def steps(recs):
     """Mean accepted steps a frame of each stage, from the frames' histories."""
-    stages = dict.fromkeys(h["stage"] for r in recs for h in r.get("history", []))
-    accepted = lambda r, s: sum(bool(h.get("accepted")) for h in r["history"] if h["stage"] == s)
-    return ", ".join(f"{s} {np.mean([accepted(r, s) for r in recs]):.1f}" for s in stages)
+    per_frame = [accepted_steps(r.get("history", [])) for r in recs]
+    stages = dict.fromkeys(s for f in per_frame for s in f)
+    return ", ".join(f"{s} {np.mean([f.get(s, 0) for f in per_frame]):.1f}" for s in stages)
 
 
 def controls(recs):

@@ -184,15 +184,20 @@ def _solver_counts(model, kind):
     return dict(counts or {})
 
 
-def _work(model, kind, history, before):
-    """What a fit did: {"steps": {stage: accepted steps}} and, for the simulation, the
-    quasistatic solves and Newton iterations it took (``before``: ``_solver_counts`` at its
-    start)."""
+def accepted_steps(history):
+    """{stage: accepted steps} of a fit's history (``PlateFit.history`` or fit.json's), in
+    stage order."""
     steps = {}
     for h in history:
         steps[h["stage"]] = steps.get(h["stage"], 0) + bool(h.get("accepted"))
+    return steps
+
+
+def _work(model, kind, history, before):
+    """What a fit did: {"steps": ``accepted_steps``} and, for the simulation, the quasistatic
+    solves and Newton iterations it took (``before``: ``_solver_counts`` at its start)."""
     after = _solver_counts(model, kind)
-    return {"steps": steps, **{k: v - before.get(k, 0) for k, v in after.items()}}
+    return {"steps": accepted_steps(history), **{k: v - before.get(k, 0) for k, v in after.items()}}
 
 
 def _shading_stages(kind, n):
