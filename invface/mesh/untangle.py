@@ -27,8 +27,9 @@ def _energy(X, X0inv, vol0, tets, delta):
     cof = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=2)
     d = np.einsum("ti,ti->t", c0, cof[:, :, 0])
     r = np.sqrt(d * d + delta * delta)
-    h = 0.5 * (d + r)
-    dh = 0.5 * (1 + d / r)
+    # (d + r) / 2, written for d < 0 without the cancellation that makes it 0 at a small delta
+    h = np.where(d >= 0, 0.5 * (d + r), 0.5 * delta * delta / np.where(d >= 0, 1.0, r - d))
+    dh = h / r
     e = s / (3 * h ** (2 / 3))
     dEdF = (2 * F / (3 * h[:, None, None] ** (2 / 3))
             - ((2 / 9) * s * h ** (-5 / 3) * dh)[:, None, None] * cof)
@@ -40,10 +41,23 @@ def _energy(X, X0inv, vol0, tets, delta):
     return float((vol0 * e).sum()), g
 
 
+def _delta(dets):
+    """The regulariser for volume ratios ``dets`` (T,): while a tet is inverted, wide enough to
+    carry it back through zero volume; once none is, small against the smallest ratio, so that
+    a tet shrunk to a sliver costs what its shape says (a fixed delta of 0.01 makes a tet at 1 %
+    of its volume cheaper than a good one)."""
+    dmin = float(dets.min())
+    if dmin <= 0:
+        return float(np.sqrt(1e-4 - dmin * 1e-2))
+    return float(min(1e-2, max(1e-8, 0.1 * dmin)))
+
+
 def untangle(X, X0, tets, free, delta=None, iters=300):
     """Move the ``free`` vertex ids of the tet mesh (X (N,3) m, tets (T,4)) to minimise the
     regularised mean-ratio distortion against the reference positions X0 (N,3), holding all
-    other vertices. Only tets touching a free vertex are scored. Returns new positions (N,3)."""
+    other vertices. Only tets touching a free vertex are scored. Without ``delta``, it follows
+    the tets: a pass with the untangling delta, then, once none is inverted, a pass with one
+    small against the smallest volume ratio. Returns new positions (N,3)."""
     free = np.asarray(free, np.int64)
     if len(free) == 0:
         return X.copy()
@@ -55,18 +69,23 @@ def untangle(X, X0, tets, free, delta=None, iters=300):
     vol0 = np.abs(np.linalg.det(D0)) / 6
     X0inv = np.linalg.inv(D0)
     vol0 = vol0 / vol0.mean()
-    if delta is None:
-        Ds = (X[T][:, 1:] - X[T][:, :1]).transpose(0, 2, 1)
-        dets = np.linalg.det(Ds @ X0inv)
-        delta = float(np.sqrt(max(1e-10, 1e-4 - min(0.0, dets.min()) * 1e-2)))
     Xw = X.copy()
 
-    def fun(z):
+    def ratios():
+        return np.linalg.det((Xw[T][:, 1:] - Xw[T][:, :1]).transpose(0, 2, 1) @ X0inv)
+
+    def fun(z, d):
         Xw[free] = z.reshape(-1, 3)
-        E, g = _energy(Xw, X0inv, vol0, T, delta)
+        E, g = _energy(Xw, X0inv, vol0, T, d)
         return E, g[free].ravel()
 
-    res = minimize(fun, X[free].ravel(), jac=True, method="L-BFGS-B",
-                   options={"maxiter": iters, "gtol": 1e-10, "ftol": 1e-14})
-    Xw[free] = res.x.reshape(-1, 3)
+    d = _delta(ratios()) if delta is None else delta
+    for _ in range(3):
+        res = minimize(fun, Xw[free].ravel(), args=(d,), jac=True, method="L-BFGS-B",
+                       options={"maxiter": iters, "gtol": 1e-10, "ftol": 1e-14})
+        Xw[free] = res.x.reshape(-1, 3)
+        smaller = d if delta is not None else _delta(ratios())
+        if smaller >= d:
+            break
+        d = smaller
     return Xw

@@ -56,6 +56,7 @@ EDGE_DISTANCE = 0.001     # m: an outer landmark this close to the scan's open e
 PRIOR_GAP = 0.01          # m: ... whose template prior lies this far off the scan is off the scan
 FALLBACK = "the template's landmark carried by the face similarity"
 CHIN_SHARE = 0.25         # a chin candidate stands out at least this share of the largest one's prominence
+CHIN_CLEAR = 0.01         # m: a chin stands out this much in the 45-degree support, or the 30-degree one decides
 NOTCH_PROMINENCE = 0.0005  # m: a notch of the profile (the stomion, the chin-lip fold) at least this deep
 OPENING_WIDTH = 0.6       # an opening narrower than this share of the carried corners' span is not
                           # the eye or the mouth (a scanner's hole), and gives no corners
@@ -193,27 +194,46 @@ def ear_boxes(V, F, L, grow=0.005):
     return np.array(boxes).reshape(-1, 2, 3)
 
 
+def _support(P, down, prior, angle, prominence):
+    """The support point in the direction ``angle`` (rad) below forward among the profile
+    indices ``down``: the local maximum of z cos(angle) - y sin(angle) nearest the ``prior``
+    (3,) of those whose prominence is at least CHIN_SHARE of the largest one's. Returns its
+    index into P and its prominence (m; 0 where there is no local maximum and the largest
+    value is taken)."""
+    f = P[down, 2] * np.cos(angle) - P[down, 1] * np.sin(angle)
+    peaks, props = find_peaks(f, prominence=prominence)
+    if not len(peaks):
+        return int(down[np.argmax(f)]), 0.0
+    # a lower lip is a small bump on the way down, the chin and a neck's base large ones: on a
+    # face longer below the mouth than the template the lip lies nearer the carried chin
+    keep = props["prominences"] >= CHIN_SHARE * props["prominences"].max()
+    peaks, prominences = peaks[keep], props["prominences"][keep]
+    k = np.argmin(np.linalg.norm(P[down[peaks]] - prior, axis=1))
+    return int(down[peaks[k]]), float(prominences[k])
+
+
 def _chin(P, tip, prior, drop=0.03, prominence=0.002):
-    """Index of the chin on the profile P (n,3, bottom to top): going down from the nose tip,
-    the local maximum of z - y (at least ``drop`` below the tip) nearest the ``prior`` chin
-    (3,) (the template's, carried by the face similarity) of those whose prominence is at
-    least CHIN_SHARE of the largest one's: the support point in the
-    down-and-forward direction (the gnathion, where the surface turns from facing forward to
-    facing down). A full lower lip is such a maximum 3 cm above it (an ICT-FaceKit identity's
-    was taken for the chin when the first maximum was), and a scan with a neck flares forward
-    again at the neck's base below it."""
+    """Index of the chin on the profile P (n,3, bottom to top): going down from the nose tip
+    (at least ``drop`` below it), the support point in the down-and-forward direction (45
+    degrees; the gnathion, where the surface turns from facing forward to facing down) nearest
+    the ``prior`` chin (3,) (the template's, carried by the face similarity) of the prominent
+    ones (``_support``). A full lower lip is such a maximum 3 cm above it (an ICT-FaceKit
+    identity's was taken for the chin when the first maximum was), and a scan with a neck
+    flares forward again at the neck's base below it. Where the underside of the chin runs
+    near 45 degrees down a neck, no maximum there stands out by ``CHIN_CLEAR`` and the best one
+    may be a wrinkle of the neck: the support 30 degrees below forward, where it stands out
+    more, is the chin. (Where the 45-degree support has no maximum at all, the profile ends
+    at the chin: a scan cut there, which ``find_landmarks`` judges by the cut's edge.)"""
     down = np.arange(tip, -1, -1)
     down = down[P[down, 1] < P[tip, 1] - drop]
     if len(down) < 3:
         raise MeshError("the profile ends below the nose: no chin found")
-    f = P[down, 2] - P[down, 1]
-    peaks, props = find_peaks(f, prominence=prominence)
-    if not len(peaks):
-        return int(down[np.argmax(f)])
-    # a lower lip is a small bump on the way down, the chin and a neck's base large ones: on a
-    # face longer below the mouth than the template the lip lies nearer the carried chin
-    peaks = peaks[props["prominences"] >= CHIN_SHARE * props["prominences"].max()]
-    return int(down[peaks[np.argmin(np.linalg.norm(P[down[peaks]] - prior, axis=1))]])
+    chin, clear = _support(P, down, prior, np.pi / 4, prominence)
+    if 0 < clear < CHIN_CLEAR:
+        forward, clear_forward = _support(P, down, prior, np.pi / 6, prominence)
+        if clear_forward > clear:
+            return forward
+    return chin
 
 
 def find_landmarks(V, F, model):
