@@ -8,13 +8,18 @@ scored by the regularised mean-ratio distortion
 weighted by the reference volume. E is 1 for a similarity of the reference and grows without
 bound as a tet flattens; with delta > 0 it stays finite for inverted tets, so a gradient
 method moves them back through zero volume (the untangling), and at delta -> 0 the minimiser
-is the quality optimum. Used when the volume morph's Laplacian relaxation (paper 001 sec. 9)
-leaves tets inverted or below the quality bound; it replaces remeshing there.
+is the quality optimum. A pass's delta (``_delta``) is wide while a tet is inverted; once
+none is, it is small against the smallest volume ratio where a tet has shrunk to a sliver
+(a fixed delta scores a tiny tet below a good one). Used when the volume morph's Laplacian
+relaxation (paper 001 sec. 9) leaves tets inverted or below the quality bound; it replaces
+remeshing there.
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy.optimize import minimize
+
+SHRUNK = 1e-3       # volume ratio below which the regulariser follows the smallest ratio
 
 
 def _energy(X, X0inv, vol0, tets, delta):
@@ -43,13 +48,13 @@ def _energy(X, X0inv, vol0, tets, delta):
 
 def _delta(dets):
     """The regulariser for volume ratios ``dets`` (T,): while a tet is inverted, wide enough to
-    carry it back through zero volume; once none is, small against the smallest ratio, so that
-    a tet shrunk to a sliver costs what its shape says (a fixed delta of 0.01 makes a tet at 1 %
-    of its volume cheaper than a good one)."""
+    carry it back through zero volume; once none is, 0.01, or, where a tet has shrunk below
+    ``SHRUNK`` of its volume, small against the smallest ratio, so that the tet costs what its
+    shape says (at 0.01, a tet at 0.1 % of its volume scores below a good one)."""
     dmin = float(dets.min())
     if dmin <= 0:
         return float(np.sqrt(1e-4 - dmin * 1e-2))
-    return float(min(1e-2, max(1e-8, 0.1 * dmin)))
+    return 1e-2 if dmin >= SHRUNK else float(max(1e-8, 0.1 * dmin))
 
 
 def untangle(X, X0, tets, free, delta=None, iters=300):
