@@ -61,8 +61,9 @@ def untangle(X, X0, tets, free, delta=None, iters=300):
     """Move the ``free`` vertex ids of the tet mesh (X (N,3) m, tets (T,4)) to minimise the
     regularised mean-ratio distortion against the reference positions X0 (N,3), holding all
     other vertices. Only tets touching a free vertex are scored. Without ``delta``, it follows
-    the tets: a pass with the untangling delta, then, once none is inverted, a pass with one
-    small against the smallest volume ratio. Returns new positions (N,3)."""
+    the tets (``_delta``): a pass with the untangling delta, then, while a tet is under
+    ``SHRUNK`` of its volume and none is inverted, up to two with one small against the
+    smallest volume ratio. Returns new positions (N,3)."""
     free = np.asarray(free, np.int64)
     if len(free) == 0:
         return X.copy()
