@@ -1,6 +1,6 @@
 """What every bench shares: timing, peak memory, the shared data, and its figures as JSON.
 
-    from _common import add_json_option, peak_rss_mib, shared, timed, write_json
+    from _common import add_json_option, peak_rss_mib, shared, steps_per_frame, timed, write_json
 
 Benches run as scripts (``python bench/NAME.py``), so this module is imported by its own name.
 """
@@ -39,6 +39,17 @@ def timed(fn, repeat=1):
 def peak_rss_mib():
     """This process's peak resident memory so far (MiB; Linux reports ru_maxrss in KiB)."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def steps_per_frame(records):
+    """{stage: mean accepted steps a frame} over fit records (fit.json's, with their
+    ``history``; runs made before the ``work`` record have it too), stages in first-seen order."""
+    import numpy as np
+
+    from invface.fit.plate import accepted_steps
+    per_frame = [accepted_steps(r.get("history", [])) for r in records]
+    stages = dict.fromkeys(s for f in per_frame for s in f)
+    return {s: float(np.mean([f.get(s, 0) for f in per_frame])) for s in stages}
 
 
 def add_json_option(parser):

@@ -26,8 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _common import add_json_option, shared, write_json
-from invface.fit.plate import accepted_steps
+from _common import add_json_option, shared, steps_per_frame, write_json
 from invface.pipeline.outputs import curve_rows, jitter, sequence_records
 
 KINDS = {"both": ("blendshape", "simulation"), "blendshape": ("blendshape",), "simulation": ("simulation",)}
@@ -50,14 +49,13 @@ def per_kind(records):
     med = lambda values: float(np.median(values)) if len(values) else float("nan")
     mean = lambda values: float(np.mean(values)) if len(values) else float("nan")
     stages = sorted({s for r in records for s in r.get("seconds", {})})
-    per_frame = [accepted_steps(r.get("history", [])) for r in records]     # runs made before ``work`` too
-    steps = sorted({s for f in per_frame for s in f})
+    steps = steps_per_frame(records)
     work = lambda key: [r["work"][key] for r in records if key in r.get("work", {})]
     lips = [r["lip_volume_change"] for r in records]
     return {
         "frames": len(records),
         "seconds_per_frame": {s: mean([r["seconds"].get(s, 0.0) for r in records]) for s in stages},
-        "steps_per_frame": {s: mean([f.get(s, 0) for f in per_frame]) for s in steps},
+        "steps_per_frame": {s: steps[s] for s in sorted(steps)},
         "solves_per_frame": mean(work("solves")),
         "newton_iterations_per_frame": mean(work("newton_iterations")),
         "curve_rms_px": med([r["curve_rms_px"] for r in records]),

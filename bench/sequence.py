@@ -23,11 +23,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import steps_per_frame
 
 import invface
 from invface.fit.calibrate import Calibration
 from invface.fit.lambdas import TEMPORAL_LAMBDA
-from invface.fit.plate import accepted_steps
 from invface.fit.samples import clip_controls, write_sample_clip
 from invface.pipeline.clips import open_clip
 from invface.pipeline.distributed import fit_sequence_distributed
@@ -37,10 +37,8 @@ from invface.render.synthetic import skin_albedo, studio_light
 
 
 def steps(recs):
-    """Mean accepted steps a frame of each stage, from the frames' histories."""
-    per_frame = [accepted_steps(r.get("history", [])) for r in recs]
-    stages = dict.fromkeys(s for f in per_frame for s in f)
-    return ", ".join(f"{s} {np.mean([f.get(s, 0) for f in per_frame]):.1f}" for s in stages)
+    """Mean accepted steps a frame of each stage, from the frames' histories, as text."""
+    return ", ".join(f"{s} {v:.1f}" for s, v in steps_per_frame(recs).items())
 
 
 def controls(recs):

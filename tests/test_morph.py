@@ -273,7 +273,6 @@ def test_ict_identity_mixes_whose_lips_stand_out(small_model, seed):
     assert max(err.values()) < 6.5 and not fell, (err, fell)
 
 
-
 @pytest.mark.parametrize("seed", [12, 20])
 def test_ict_identity_mixes_whose_chin_underside_runs_at_45_degrees(small_model, seed):
     """Faces of ICT's identity space (bench/identity_3d.py's seeding) whose chin's underside runs
@@ -283,7 +282,6 @@ def test_ict_identity_mixes_whose_chin_underside_runs_at_45_degrees(small_model,
     more, finds it."""
     L, _, fell, annotated, _ = _ict_mix_landmarks(small_model, seed)
     assert np.linalg.norm(L["chin"] - annotated(8)) * 1000 < 2.0 and not fell
-
 
 
 def test_ict_identity_mix_whose_scalp_is_left_out_builds(default_model):
@@ -319,6 +317,7 @@ def test_ict_identity_mix_whose_scalp_is_left_out_builds(default_model):
             for k, i in (("eye_outer_L", 45), ("eye_outer_R", 36))]
     assert max(eyes) < 6.0, eyes
 
+
 def test_snap_past_a_corner_of_the_scan_leaves_the_vertex_to_the_fill():
     """A template vertex beyond a corner of a partial scan's border has the corner vertex as its
     closest point: it is off the scan, as one beyond an edge is. Before, every such vertex
@@ -340,6 +339,7 @@ def test_snap_past_a_corner_of_the_scan_leaves_the_vertex_to_the_fill():
     assert ok[inside & (np.abs(Vt[:, :2]) < 0.01 - 1e-9).all(1)].all()
     assert not ok[~inside].any()
     assert len(cKDTree(Vs[ok]).query_pairs(1e-9)) == 0
+
 
 def _parts_in_front_of_the_skin(model):
     """Pixels of a front view at rest where an inner part pokes through the skin (seen where

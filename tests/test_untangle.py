@@ -49,7 +49,6 @@ def test_untangles_a_scrambled_template(small_model):
     assert np.array_equal(Y[held], X[held])
 
 
-
 def test_a_shrunken_tet_costs_no_less_than_a_good_one():
     """The mean-ratio distortion is scale-free: a tet shrunk to a twentieth of its size (1e-4
     of its volume) is as good as the reference, and a sliver at that size worse. A fixed

@@ -90,7 +90,9 @@ def untangle(X, X0, tets, free, delta=None, iters=300):
         res = minimize(fun, Xw[free].ravel(), args=(d,), jac=True, method="L-BFGS-B",
                        options={"maxiter": iters, "gtol": 1e-10, "ftol": 1e-14})
         Xw[free] = res.x.reshape(-1, 3)
-        smaller = d if delta is not None else _delta(ratios())
+        if delta is not None:
+            break
+        smaller = _delta(ratios())
         if smaller >= d:
             break
         d = smaller

@@ -137,9 +137,10 @@ def snap(Vm, Ft, Vg, Fg, normals=None, max_distance=SNAP_DISTANCE):
     snapped = barycentric_points(Vg, Fg, tri2, w2)
     on_edge = boundary_vertices(Fg, len(Vg))[Fg[tri2]]
     support = w2 > 1e-6
+    on_border = (on_edge & support).sum(1)
     # on a target boundary edge, or at a boundary vertex (past a corner of the border, where
     # every template vertex beyond it would otherwise snap onto that one vertex)
-    at_border = ((on_edge & support).sum(1) >= 2) | ((support.sum(1) == 1) & (on_edge & support).any(1))
+    at_border = (on_border >= 2) | ((support.sum(1) == 1) & (on_border == 1))
     # a target triangle whose vertices projected far (behind, across a hole) is unreliable
     far = dist[Fg[tri2]].max(1) > max_distance
     ok = ~at_border & ~far & (d2 < max_distance) & (np.linalg.norm(snapped - Vm, axis=1) < 2 * max_distance)
