@@ -284,6 +284,16 @@ def test_ict_identity_mixes_whose_chin_underside_runs_at_45_degrees(small_model,
     assert np.linalg.norm(L["chin"] - annotated(8)) * 1000 < 2.0 and not fell
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_ict_identity_mixes_whose_nose_turns_into_the_lip_rounded(small_model, seed):
+    """Faces of ICT's identity space (bench/identity_3d.py's seeding) whose columella turns into
+    the upper lip in a rounded curve: the sharpest concave corner at a 2 mm scale was the upper
+    lip's deepest point, 8-9 mm below ICT's annotated subnasale. The point deepest behind the
+    line from the nose tip to the upper lip is the junction."""
+    L, _, fell, annotated, _ = _ict_mix_landmarks(small_model, seed)
+    assert np.linalg.norm(L["subnasale"] - annotated(33)) * 1000 < 5.0 and not fell
+
+
 def test_ict_identity_mix_whose_scalp_is_left_out_builds(default_model):
     """Face 9 of ICT's identity space (bench/identity_3d.py's seeding): its bald cranium stands
     up to 38 mm outside the template's carried scalp and is left out as a crown, so the skin

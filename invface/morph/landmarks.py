@@ -5,8 +5,8 @@ landmark starts from a prior, the template's landmark carried by a similarity fi
 template's face (face_similarity) to the target's closest point, and is then found by the paper's rule for it:
 
 - on the profile curve (mesh ∩ symmetry plane): the nose tip (most forward point), the nose
-  bridge (the deepest point above the tip), the subnasale (the sharpest concave corner
-  between tip and mouth), the upper and lower lip (most forward points either side of the
+  bridge (the deepest point above the tip), the subnasale (the deepest point below the tip,
+  measured behind the line from the tip to the upper lip), the upper and lower lip (most forward points either side of the
   stomion), the chin (the first down-and-forward extreme below the nose), the neck start
   (2 cm below the chin) and the top of the head (the highest point);
 - the left/right extreme points of the head above the chin;
@@ -38,7 +38,6 @@ from ..errors import MeshError
 from ..mesh.closest import barycentric_points, closest_points
 from ..mesh.sections import plane_sections
 from ..mesh.triangles import boundary_edges, boundary_loops, edge_components, unique_edges
-from ..template.features import profile_concavity
 from .curvature import feature_strength
 from .orient import rigid_icp
 
@@ -210,6 +209,23 @@ def _support(P, down, prior, angle, prominence):
     peaks, prominences = peaks[keep], props["prominences"][keep]
     k = np.argmin(np.linalg.norm(P[down[peaks]] - prior, axis=1))
     return int(down[peaks[k]]), float(prominences[k])
+
+
+def _subnasale(P, tip, stom, cand):
+    """The subnasale among the profile indices ``cand`` (on the face's outline near its prior):
+    the one deepest behind the line from the nose tip (index ``tip``) to the upper lip's most
+    forward point between the stomion (index ``stom``) and the candidates, the vertex of the
+    nasolabial angle, where the profile runs parallel to that line. Paper 001 (sec. 6) takes
+    the local minimum of the profile's forward distance next to the tip; the forward direction
+    here is the normal of that line. On faces whose turn from the columella to the lip is
+    rounded, the sharpest concave corner at a 2 mm scale is the upper lip's deepest point,
+    8-9 mm below the junction that ICT-FaceKit annotates."""
+    idx, y, z = np.arange(len(P)), P[:, 1], P[:, 2]
+    lip = idx[(idx > stom) & (idx < tip) & (y > y[stom]) & (y < y[cand].min())]
+    lip = lip[np.argmax(z[lip])] if len(lip) else cand[np.argmin(y[cand])]
+    u = P[lip, 1:] - P[tip, 1:]
+    r = P[cand, 1:] - P[tip, 1:]
+    return cand[np.argmax(u[0] * r[:, 1] - u[1] * r[:, 0])]       # (y, z) cross: > 0 behind the line
 
 
 def _chin(P, tip, prior, drop=0.03, prominence=0.002):
@@ -398,8 +414,8 @@ class _ProfileSearch:
     def mouth(self, chin):
         """The stomion (the highest notch of the profile seen from the front near the mouth
         corners' height, else its deepest point there: with the corners placed low the window
-        reaches the chin-lip fold, a deeper notch below the lower lip), the subnasale (the
-        sharpest concave corner between it and the nose tip) and the lips (the most forward
+        reaches the chin-lip fold, a deeper notch below the lower lip), the subnasale
+        (``_subnasale``) and the lips (the most forward
         points either side of the stomion)."""
         P, idx, L, tip = self.P, self.idx, self.L, self.tip
         y, z = P[:, 1], P[:, 2]
@@ -419,8 +435,10 @@ class _ProfileSearch:
                                  "no mouth found on the profile at the height of the mouth corners")
         sub_prior = self.reanchor("subnasale", "nose_tip", "stomion")
         between = ((idx < tip) & (idx > stom) & (y > L["stomion"][1] + 0.006) & self.window(sub_prior, 0.01))
-        if between.any():
-            sub = idx[between][np.argmax(profile_concavity(P, idx[between]))]
+        cand = idx[between]
+        cand = cand[z[cand] >= _front_depth(P, y[cand]) - 1e-4]        # not inside the nostrils
+        if len(cand):
+            sub = _subnasale(P, tip, stom, cand)
             L["subnasale"] = P[sub]
         else:
             sub = self.fallback("subnasale", sub_prior, "no concave corner between the nose tip and the mouth "
