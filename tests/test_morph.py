@@ -10,7 +10,7 @@ from invface.errors import MeshError
 from invface.mesh.closest import closest_points
 from invface.mesh.triangles import vertex_normals
 from invface.morph.blendshapes import read_blendshapes, recognised
-from invface.morph.build import build_model, inside_fraction
+from invface.morph.build import build_model, inside_fraction, orient_target
 from invface.morph.curvature import stencil_curvature
 from invface.morph.landmarks import find_landmarks, template_landmarks
 from invface.morph.openings import OPENINGS, inner_surfaces, opening_centres, ordered_loops, split_loop
@@ -205,6 +205,18 @@ def test_a_damaged_scan_builds_and_simulates(small_expressive_model, damage):
     assert r.converged and r.inverted == 0
 
 
+def _ict_mix(seed):
+    """Face ``seed`` of ICT-FaceKit's identity space (its 20 shapes at coefficients ~ N(0, 1.5^2),
+    seeded as in bench/identity_3d.py): vertices (n,3) cm, faces. Skips without ICT-FaceKit."""
+    from conftest import ICT
+    from invface.io.meshes import read_mesh
+    if not (ICT / "identities.npz").exists():
+        pytest.skip("ICT-FaceKit data (../shared/data/ict-facekit) is not available")
+    V, F = read_mesh(ICT / "neutral.obj")
+    S = np.load(ICT / "identities.npz")["deltas"]
+    return V + np.tensordot(np.random.default_rng(seed).normal(0, 1.5, len(S)), S, axes=1), F
+
+
 def _ict_mix_landmarks(model, seed):
     """Face ``seed`` of ICT-FaceKit's identity space (its 20 shapes at coefficients ~ N(0, 1.5^2),
     seeded as in bench/identity_3d.py), oriented onto ``model`` and its landmarks found: (L, off,
@@ -213,13 +225,7 @@ def _ict_mix_landmarks(model, seed):
     import json
 
     from conftest import ICT
-    from invface.io.meshes import read_mesh
-    from invface.morph.build import orient_target
-    if not (ICT / "identities.npz").exists():
-        pytest.skip("ICT-FaceKit data (../shared/data/ict-facekit) is not available")
-    V, F = read_mesh(ICT / "neutral.obj")
-    S = np.load(ICT / "identities.npz")["deltas"]
-    mix = V + np.tensordot(np.random.default_rng(seed).normal(0, 1.5, len(S)), S, axes=1)
+    mix, F = _ict_mix(seed)
     ids = json.load(open(ICT / "landmarks.json"))["landmarks_68_multipie"]
     target, al, _, _ = orient_target(clean(mix, F, unit="cm"), model, "cm")
     L, off, fell = find_landmarks(al.apply(target.vertices), target.faces, model)
@@ -292,6 +298,18 @@ def test_ict_identity_mixes_whose_nose_turns_into_the_lip_rounded(small_model, s
     line from the nose tip to the upper lip is the junction."""
     L, _, fell, annotated, _ = _ict_mix_landmarks(small_model, seed)
     assert np.linalg.norm(L["subnasale"] - annotated(33)) * 1000 < 5.0 and not fell
+
+
+@pytest.mark.parametrize("seed", [4, 12, 19, 20])
+def test_ict_identity_mixes_with_a_wide_bald_head_keep_their_scalp(small_model, seed):
+    """Faces of ICT's identity space whose bald crania stand 28-46 mm outside the template's
+    carried scalp. Their ears, 16-39 mm out and rough, were taken for hair (faces 12, 19, 20),
+    and face 4's cranium, smooth but beyond CROWN, for a crown: the scalp followed the
+    template, 9-18 mm (median) off the scan's. A rough patch that lies wholly at the template's
+    head extremes is an ear, and a smooth one beyond CROWN that rises from the skin as a
+    gentle slope is a cranium: nothing is left out."""
+    mix, F = _ict_mix(seed)
+    assert orient_target(clean(mix, F, unit="cm"), small_model, "cm")[3] == []
 
 
 def test_ict_identity_mix_whose_scalp_is_left_out_builds(default_model):
@@ -647,6 +665,9 @@ def _difficult_scan(tpl, kind):
         C = c.vertices @ np.array([[1, 0, 0], [0, 0, 1], [0, 1, 0.0]]) + top + np.array([0, 0.04, -0.01])
         Y = np.concatenate([Y, C / unit])
         F = np.concatenate([F, c.faces + len(X)])
+    if kind == "cranium":            # a bald cranium standing out by half its height above the brows
+        lift = np.clip(0.5 * (X[:, 1] - X[tpl.landmarks["glabella"], 1] - 0.025), 0, 0.045)
+        Y = (X + lift[:, None] * vertex_normals(X, F)) / unit
     if kind == "hair":               # hair 25 mm thick (+-20 %) over the scalp, thinning over 2 cm to a hairline
         lift = X[:, 1] - X[tpl.landmarks["glabella"], 1] - 0.04
         thick = 0.025 * np.clip(lift / 0.02, 0, 1) * (1 + 0.2 * np.sin(X[:, 0] * 300) * np.sin(X[:, 2] * 300))
@@ -694,6 +715,16 @@ def test_real_scan_difficulties_build(kind, small_expressive_model):
     known = dict(zip(tl, np.einsum("nk,nkj->nj", w, truth[tpl.triangles[tri]])))
     err = {k: np.linalg.norm(res.landmarks[k] - known[k]) * 1000 for k in SHARP}
     assert max(err.values()) < 3.0, err
+
+
+@pytest.mark.parametrize("kind", ["cranium", "crown"])
+def test_a_wide_cranium_is_skin_and_a_crown_is_not(kind, small_expressive_model):
+    """Both stand more than CROWN outside the template's carried scalp. A cranium up to 32 mm
+    wider, rising from the brows as a gentle slope, is kept (it was left out as a crown); a
+    crown stands on the head at a rim and is left out."""
+    Y, F, unit, _ = _difficult_scan(small_expressive_model, kind)
+    hidden = orient_target(clean(Y, F, unit="mm"), small_expressive_model, "mm")[3]
+    assert (hidden == []) if kind == "cranium" else ("top" in hidden), hidden
 
 
 def test_failed_build_names_its_stage_and_draws_what_it_found(small_model, tmp_path, monkeypatch):

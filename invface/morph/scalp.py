@@ -7,7 +7,8 @@ to within the spread of adult crania about a face of that size. Each scan vertex
 scalp (above the brows, and above the eyes behind the orbits) is measured along the
 template's normal from that prediction (positive: outside).
 The hidden region grows, over the scan's edges, from seed patches (at least ``SEED_AREA``
-more than ``SEED`` outside and rough like hair, or more than ``CROWN`` outside) through
+more than ``SEED`` outside and rough like hair, or more than ``CROWN`` outside and rising from
+the skin at a rim, not an ear at the head's sides) through
 vertices more than ``GROW`` outside (hair thins to nothing at the hairline, a crown meets the
 forehead on a slope) and through the scalp behind the template's open back edge, where
 nothing can be measured: its triangles are left out, and the cranium and skin there follow
@@ -19,9 +20,13 @@ bald scalps reach 14-17 mm outside (ICT-FaceKit's neutral, whose cranium is long
 template's, 99th percentile 14.0 mm; a mix of its identity shapes, 16.5 mm; Lee
 Perry-Smith's shaved head 7.0 mm), but smoothly (roughness 0.1-0.2 mm there), and their
 rough patches beyond ``SEED`` are an ear's rim (the template has no ears), under 0.4 cm^2.
-Demosthenes' sculpted hair reaches 24 mm with a roughness of 1.2-1.6 mm over patches of
-13-16 cm^2; Nefertiti's crown 166 mm. Hair thinner than ``SEED`` everywhere, or as smooth as
-skin and thinner than ``CROWN``, is taken for skin.
+Wider bald heads (ICT identity mixes at 1.5 sd) reach 28-46 mm, rising from the forehead as a
+slope (at most 0.37 m per m from the nearest skin), and their ears stand 16-39 mm out, rough
+(1.5-2.2 mm) over 3-6 cm^2, their nearest template points within 9-18 mm of its head
+extremes. Demosthenes' sculpted hair reaches 24 mm with a roughness of 1.2-1.6 mm over patches
+of 6-16 cm^2, each reaching 25-67 mm from the head extremes; Nefertiti's crown 166 mm, rising from its rim at 0.72-0.82 m per m. Hair
+thinner than ``SEED`` everywhere, or as smooth as skin and thinner than ``CROWN`` or as gently
+sloped as a cranium, is taken for skin.
 """
 from __future__ import annotations
 
@@ -40,6 +45,8 @@ GROW = 0.006         # m: the hidden region grows through vertices this far outs
 ABOVE_BROWS = 0.01   # m: the scalp is what lies this far above the template's brows ...
 BEHIND_ORBIT = 0.025  # m: ... or above the eye corners and this far behind them
 ALONG_NORMAL = 0.9   # the offset counts where the scan point lies this square to the template
+RIM_SLOPE = 0.6      # a smooth seed rises from the skin at least this steeply (m per m) to be a crown
+EAR_ZONE = 0.02      # m: a rough seed patch this close to the template's head extremes is an ear
 
 
 def scalp_offsets(Va, template, A, t):
@@ -101,6 +108,29 @@ def roughness(P, s, inner=0.01, outer=0.015, spacing=0.002):
     return np.sqrt(ball_mean((sq - ball_mean(sq, inner)) ** 2, outer))[cell.ravel()]
 
 
+def _rises_steeply(Va, s, measured):
+    """Boolean (n,) of the vertices of Va (n,3) whose offset s (n,) m rises from the skin (the
+    nearest measured vertex less than GROW outside) by at least ``RIM_SLOPE`` m per metre
+    between them: a crown or a helmet stands on the head at a rim, a large cranium rises from
+    the forehead as a gentle slope."""
+    skin = np.flatnonzero(measured & (s < GROW))
+    if not len(skin):
+        return np.ones(len(s), bool)
+    d, j = cKDTree(Va[skin]).query(Va)
+    return s - s[skin[j]] >= RIM_SLOPE * d
+
+
+def _ear_patches(C, label, seed, template):
+    """Boolean (n,) of the seed vertices whose patch (``label``) lies wholly where an ear
+    stands out: their template points C (n,3) within ``EAR_ZONE`` of the template's head
+    extremes (the template has no ears; a real ear's rim is rough and, on a wide head, more
+    than SEED outside)."""
+    ext = template.neutral[[template.landmarks["head_extreme_L"], template.landmarks["head_extreme_R"]]]
+    near = np.min(np.linalg.norm(C[:, None] - ext[None], axis=2), axis=1) < EAR_ZONE
+    far = np.bincount(label[seed & ~near], minlength=len(C)) > 0        # patches reaching beyond
+    return seed & ~far[label]
+
+
 def hidden_scalp(Va, F, template, A, t):
     """Triangles (f,) bool of the aligned scan (Va (n,3), F (f,3)) over a hidden scalp, the
     regions they cover (list of names) and the largest offset (m) among them."""
@@ -115,11 +145,11 @@ def hidden_scalp(Va, F, template, A, t):
         return np.zeros(len(F), bool), [], 0.0
     rough = np.zeros(len(s))
     rough[measured] = roughness(Va[measured], s[measured])
-    seed &= (s > CROWN) | (rough > ROUGH)
+    seed &= ((s > CROWN) & _rises_steeply(Va, s, measured)) | (rough > ROUGH)
     Fs = F[seed[F].all(1)]
     label = edge_components(Fs[:, [0, 1, 1, 2]], len(Va))
     area = np.bincount(label[Fs[:, 0]], weights=triangle_areas(Va, Fs), minlength=len(Va))
-    seed &= area[label] >= SEED_AREA
+    seed &= (area[label] >= SEED_AREA) & ~_ear_patches(C, label, seed, template)
     if not seed.any():
         return np.zeros(len(F), bool), [], 0.0
     grow = (s > GROW) | beyond
