@@ -39,7 +39,7 @@ from .landmarks import FALLBACK, ear_boxes, find_landmarks, template_landmarks
 from .openings import (ACROSS, MAX_INNER_FRACTION, closed_seams, inner_surfaces, lid_pairs, map_openings,
                        opening_centres)
 from .surface import SurfacePoisson, morph_surface
-from .target import Target, clean, drop_faces
+from .target import MIN_TRIANGLES, Target, clean, drop_faces
 from .transfer import carry_offsets
 from .units import settle_unit
 from .volume import carry_bone, carry_fibers, carry_points, carry_similar, inside_fraction, morph_volume
@@ -218,6 +218,10 @@ def orient_target(target, template, unit=None, say=None):
     cropped, hidden = crop_to_head(target, al.apply(target.vertices), template, *scaling.similarity)
     for note in cropped.notes[len(target.notes):]:
         say(note)
+    if len(cropped.faces) < MIN_TRIANGLES:
+        raise MeshError(f"{target.name}: cropped to the head the template's face was aligned to, {len(cropped.faces)} "
+                        f"triangles are left: the alignment took another part of the scan for the face; crop "
+                        "the scan to the head and try again")
     target = cropped
     TL = template_landmarks(template)
     inner = inner_surfaces(al.apply(target.vertices), target.faces, opening_centres(TL))
