@@ -6,9 +6,10 @@ template's face (face_similarity) to the target's closest point, and is then fou
 
 - on the profile curve (mesh ∩ symmetry plane): the nose tip (most forward point), the nose
   bridge (the deepest point above the tip), the subnasale (the deepest point below the tip,
-  measured behind the line from the tip to the upper lip), the upper and lower lip (most forward points either side of the
-  stomion), the chin (the first down-and-forward extreme below the nose), the neck start
-  (2 cm below the chin) and the top of the head (the highest point);
+  measured behind the line from the tip to the upper lip), the upper and lower lip (most
+  forward points either side of the stomion), the chin (the first down-and-forward extreme
+  below the nose), the neck start (2 cm below the chin) and the top of the head (the highest
+  point);
 - the left/right extreme points of the head above the chin;
 - priors for the bridge, stomion, subnasale, mouth corners and alar points are the template's
   moved by the offsets already found at the nose tip, bridge, stomion and chin, interpolated
@@ -415,8 +416,7 @@ class _ProfileSearch:
         """The stomion (the highest notch of the profile seen from the front near the mouth
         corners' height, else its deepest point there: with the corners placed low the window
         reaches the chin-lip fold, a deeper notch below the lower lip), the subnasale
-        (``_subnasale``) and the lips (the most forward
-        points either side of the stomion)."""
+        (``_subnasale``) and the lips (the most forward points either side of the stomion)."""
         P, idx, L, tip = self.P, self.idx, self.L, self.tip
         y, z = P[:, 1], P[:, 2]
         my = 0.5 * (L["mouth_corner_L"][1] + L["mouth_corner_R"][1])

@@ -24,9 +24,9 @@ Wider bald heads (ICT identity mixes at 1.5 sd) reach 28-46 mm, rising from the 
 slope (at most 0.37 m per m from the nearest skin), and their ears stand 16-39 mm out, rough
 (1.5-2.2 mm) over 3-6 cm^2, their nearest template points within 9-18 mm of its head
 extremes. Demosthenes' sculpted hair reaches 24 mm with a roughness of 1.2-1.6 mm over patches
-of 6-16 cm^2, each reaching 25-67 mm from the head extremes; Nefertiti's crown 166 mm, rising from its rim at 0.72-0.82 m per m. Hair
-thinner than ``SEED`` everywhere, or as smooth as skin and thinner than ``CROWN`` or as gently
-sloped as a cranium, is taken for skin.
+of 6-16 cm^2, each reaching 25-67 mm from the head extremes; Nefertiti's crown 166 mm, rising
+from its rim at 0.72-0.82 m per m. Hair thinner than ``SEED`` everywhere, or as smooth as skin
+and thinner than ``CROWN`` or as gently sloped as a cranium, is taken for skin.
 """
 from __future__ import annotations
 
