@@ -154,6 +154,12 @@ def _front_depth(P, ys, max_step=0.005):
     return np.where(inside, zc, -np.inf).max(axis=1)
 
 
+def _on_outline(P, ids):
+    """The profile indices ``ids`` on the face's outline: the frontmost profile point at their
+    height (``_front_depth``), not a piece of the profile behind it (inside a nostril)."""
+    return ids[P[ids, 2] >= _front_depth(P, P[ids, 1]) - 1e-4]
+
+
 def _ears(V, F, ids, threshold=EAR_CURVATURE, grow=0.01):
     """Mask over vertex ids (k,) of the ears: the paper's (sec. 9.1) sum of absolute
     curvatures above ``threshold`` (1/m) on the outer third of the head's width, grown by
@@ -379,8 +385,7 @@ class _ProfileSearch:
         near_tip = self.window(self.prior["nose_tip"], 0.03)
         if not near_tip.any():
             raise MeshError("the profile curve misses the nose: the alignment to the template failed")
-        ids = idx[near_tip]
-        ids = ids[P[ids, 2] >= _front_depth(P, P[ids, 1]) - 1e-4]
+        ids = _on_outline(P, idx[near_tip])
         up = ids[np.argsort(P[ids, 1], kind="stable")]
         bumps, _ = find_peaks(P[up, 2], prominence=NOTCH_PROMINENCE)
         self.tip = (up[bumps[np.argmin(np.linalg.norm(P[up[bumps]] - self.prior["nose_tip"], axis=1))]]
@@ -435,8 +440,7 @@ class _ProfileSearch:
                                  "no mouth found on the profile at the height of the mouth corners")
         sub_prior = self.reanchor("subnasale", "nose_tip", "stomion")
         between = ((idx < tip) & (idx > stom) & (y > L["stomion"][1] + 0.006) & self.window(sub_prior, 0.01))
-        cand = idx[between]
-        cand = cand[z[cand] >= _front_depth(P, y[cand]) - 1e-4]        # not inside the nostrils
+        cand = _on_outline(P, idx[between])                 # not inside the nostrils
         if len(cand):
             sub = _subnasale(P, tip, stom, cand)
             L["subnasale"] = P[sub]
