@@ -392,6 +392,7 @@ def _stats(model, template, target, al, scaling, hidden, Va, Fg, L, TL, surf, vm
         "face_scale": scaling.face_scale, "cleaning": target.notes, "hidden_scalp": hidden,
         "symmetry_error_mm": al.frame.symmetry_error * 1000,
         "alignment_residual_mm": al.residual * 1000, "flipped_residual_mm": al.flipped_residual * 1000,
+        "alignment_uncovered_mm": al.uncovered * 1000,
         "landmark_to_morph_mm": {k: float(np.linalg.norm(on_model[k] - L[k]) * 1000) for k in L},
         "surface_to_target_mm": {"mean": float(dist.mean() * 1000), "max": float(dist.max() * 1000)},
         "face_to_scan_mm": {"median": float(np.median(face)), "p95": float(np.percentile(face, 95)),

@@ -17,7 +17,8 @@
 5. Up/down: the frame leaves the sign of "up" open (both signs give a valid right-handed
    frame). Each nose candidate with each sign is mapped onto the template through the
    template's own frame and refined by trimmed rigid ICP on the face around the nose; the
-   candidate that fits the template best wins. This replaces the paper's nose-shape scores
+   candidate that fits the template best wins, among those where the template's face also
+   lies on the scan (``best_pose``). This replaces the paper's nose-shape scores
    for the sign, which the generated template's blunt nose does not follow. A scan in several
    large pieces (a head beside its stand) also gets each piece's own frames. The winning ICP
    pose is the rigid part of ``model.scan_transform``.
@@ -45,6 +46,9 @@ HEAD_REACH = 0.12        # m: the head around a nose tip (its centroid sets "for
 REFINE_HEIGHT = 0.06     # m: the symmetry plane is refined on the nose and cheeks, this far
 REFINE_DEPTH = 0.075     # above/below and behind the nose tip; their reflections are measured
 REFINE_REACH = 0.03      # against the scan's triangles this much farther out
+FACE_COVER = 0.06        # m: the template's skin this near its nose tip must lie on the scan ...
+COVER_SAMPLES = 600      # ... measured on this many of its vertices, by the 90th percentile
+COVER_GAIN = 1.5         # of their distances: a pose this many times the best pose's is not the face's
 
 
 @dataclass
@@ -255,12 +259,14 @@ class Alignment:
     """Rigid map of target metres into the model frame: x_model = R @ x + t. residual: the
     median distance (m) from the target's face samples to the template after ICP; frame:
     the target's Frame; flipped_residual: the next best candidate's (another nose tip or the
-    other up/down sign)."""
+    other up/down sign); uncovered: the 90th percentile of the distances (m) from the template's
+    face (its skin within FACE_COVER of the nose tip) to the target, the other way round."""
     R: np.ndarray
     t: np.ndarray
     residual: float
     frame: Frame
     flipped_residual: float
+    uncovered: float = 0.0
 
     def apply(self, P):
         return np.asarray(P) @ self.R.T + self.t
@@ -301,6 +307,7 @@ def rigid_icp(P, V, F, R, t, iters=20, trim=2.5, weights=None, scale=False):
 
 
 _TEMPLATE_FRAMES = {}
+_TEMPLATE_FACES = {}
 
 
 def template_frame(model):
@@ -311,7 +318,36 @@ def template_frame(model):
     return _TEMPLATE_FRAMES[key]
 
 
-def _piece_frames(V, F, share=0.1):
+def template_face(model):
+    """COVER_SAMPLES of the template's skin vertices (k,3) within FACE_COVER of its nose tip
+    (cached per model object)."""
+    key = id(model)
+    if key not in _TEMPLATE_FACES:
+        V = model.neutral
+        ids = np.flatnonzero(np.linalg.norm(V - V[model.landmarks["nose_tip"]], axis=1) < FACE_COVER)
+        _TEMPLATE_FACES[key] = V[np.random.default_rng(4).permutation(ids)[:COVER_SAMPLES]]
+    return _TEMPLATE_FACES[key]
+
+
+def uncovered(mesh, face, R, t):
+    """The 90th percentile of the distances (m) from the template's face points (k,3, model
+    frame) to the target (a ``TriangleLocator`` in target coordinates) under the pose
+    x_model = R x + t: where the template's nose or lips stand over nothing, it is centimetres."""
+    return float(np.percentile(mesh.closest((face - t) @ R)[2], 90))
+
+
+def best_pose(residuals, uncovereds, n=1):
+    """Indices of the ``n`` poses of least residual among those whose uncovered (each (k,), m)
+    is within COVER_GAIN times the least: the scan's samples close to the template and the
+    template's face on the scan. The residual alone lets a smooth region (the side of a head,
+    a torso) lie on the template's cheeks and forehead as closely as a face does; the
+    template's nose then stands over nothing."""
+    r, u = np.asarray(residuals, float), np.asarray(uncovereds, float)
+    ok = np.flatnonzero(u <= COVER_GAIN * u.min())
+    return ok[np.argsort(r[ok])][:n]
+
+
+def _piece_frames(V, F, share=0.02):
     """Unrefined Frames of the whole mesh and, when it has several large pieces (at least
     ``share`` of the largest's area: a head beside its stand or a second scan piece), of each
     piece on its own, whose symmetry plane the others do not tilt. Raises the first piece's
@@ -339,8 +375,17 @@ def align_to_template(V, F, model, radius=0.09, n_samples=2000, quick=8):
     through the template's frame and refined by ``quick`` ICP iterations; the FULL_ICP best
     poses are refined to convergence, and the best of those wins; its frame's symmetry plane
     is refined (``refine_frame``).
+
+    Poses are chosen by ``best_pose``: the scan's samples to the template and the template's
+    face to the scan.
     """
     tf = template_frame(model)
+    mesh, face = TriangleLocator(V, F), template_face(model)
+
+    def scored(P, R, t, iters):
+        R, t, med = rigid_icp(P, model.neutral, model.triangles, R, t, iters=iters)
+        return R, t, med, uncovered(mesh, face, R, t)
+
     trials = []
     for fr in _piece_frames(V, F):
         near = V[np.linalg.norm(V - fr.nose_tip, axis=1) < radius]
@@ -350,11 +395,11 @@ def align_to_template(V, F, model, radius=0.09, n_samples=2000, quick=8):
             # target -> frame coords (origin at the nose tip) -> template coords
             R0 = tf.R.T @ Rt
             t0 = tf.nose_tip - R0 @ fr.nose_tip
-            trials.append((rigid_icp(P, model.neutral, model.triangles, R0, t0, iters=quick), fr, P))
-    order = np.argsort([tr[0][2] for tr in trials])[:FULL_ICP]
-    full = [(rigid_icp(P, model.neutral, model.triangles, *trials[k][0][:2]), trials[k][1])
-            for k in order for P in [trials[k][2]]]
-    full.sort(key=lambda f: f[0][2])
-    (R, t, med), fr = full[0]
+            trials.append((scored(P, R0, t0, quick), fr, P))
+    order = best_pose([tr[0][2] for tr in trials], [tr[0][3] for tr in trials], FULL_ICP)
+    full = [(scored(trials[k][2], *trials[k][0][:2], 20), trials[k][1]) for k in order]
+    k = best_pose([f[0][2] for f in full], [f[0][3] for f in full])[0]
+    (R, t, med, uncov), fr = full[k]
     fr = refine_frame(V, F, fr, shell_inertia(V, F)[0])
-    return Alignment(R, t, med, fr, full[1][0][2] if len(full) > 1 else np.inf)
+    nxt = min((f[0][2] for i, f in enumerate(full) if i != k), default=np.inf)
+    return Alignment(R, t, med, fr, nxt, uncov)

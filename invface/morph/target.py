@@ -21,7 +21,8 @@ BOX_RANGE_M = (0.12, 1.5)        # ... of a face, a head or a bust (a provisiona
 NO_UNIT_DIAGS_M = (0.3, 0.6)     # a scan no unit fits is tried at these diagonals (a head, a bust)
 MIN_TRIANGLES = 500
 MIN_AREA_M2 = 1e-9              # paper 001 sec. 4: smaller triangles are dropped
-MIN_PIECE_FRACTION = 0.1       # pieces under this share of the largest one's area are dropped
+MIN_PIECE_FRACTION = 0.02      # pieces under this share of the largest one's area are dropped
+                               # (a face apart from a torso ten times its area stays)
 SPIKE_RATIO = 10.0              # a vertex this many local edge lengths off its neighbours' mean
 
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import MeshError
 from .landmarks import face_similarity
-from .orient import align_to_template
+from .orient import align_to_template, best_pose
 from .target import UNITS, provisional_scales
 
 UNIT_TOLERANCE = 1.35         # metres per unit within this factor of a unit: that unit
@@ -93,19 +93,20 @@ def settle_unit(target, template, unit=None, progress=None):
             if guess != "none":          # a unit the box allows: kept when the face agrees
                 m = _measure(t, template)
                 if m[0].residual < 0.01 and abs(np.log(m[1])) < np.log(UNIT_TOLERANCE):
-                    tried = [(m[0].residual, guess, t, m)]
+                    tried = [(guess, t, m)]
                     break
             t, m = _settle(t, template, m)
         except MeshError as e:
             errors.append((guess if guess != "none" else f"no unit at {s * diag:.2g} m across", str(e)))
             continue
-        # every guess is tried and the closest face wins: a guess can align the face well at
-        # the wrong scale (a turned bust's, 1.5 times too large, 0.5 mm further than the right one)
-        tried.append((m[0].residual, guess, t, m))
+        # every guess is tried and the closest face wins (orient.best_pose): a guess can align
+        # the face well at the wrong scale (a turned bust's, 1.5 times too large, 0.5 mm
+        # further than the right one)
+        tried.append((guess, t, m))
     if not tried:
         raise MeshError(f"{target.name}: no face found at any scale tried ({', '.join(g for g, _ in errors)}); "
                         f"at the first: {errors[0][1]}")
-    _, guess, t, m = min(tried, key=lambda r: r[0])
+    guess, t, m = tried[best_pose([r[2][0].residual for r in tried], [r[2][0].uncovered for r in tried])[0]]
     per_unit = t.scale
     unit = next((u for u, s in UNITS.items() if abs(np.log(per_unit / s)) < np.log(UNIT_TOLERANCE)), "none")
     if unit == "none":
