@@ -126,6 +126,17 @@ def _nose_scores(P, c):
     return out
 
 
+def _walks(ch):
+    """The points of a plane section ``ch`` (mesh.sections.Section) as walks to score: the
+    chain, and for a closed loop also the loop started half-way round. ``_nose_scores`` skips
+    the points within NOSE_ARC of a walk's ends, and where a loop starts depends on how the
+    scan is turned: a loop that started at the nose tip lost the nose."""
+    if not ch.closed:
+        return [ch.points]
+    P = np.roll(ch.points[:-1], (len(ch.points) - 1) // 2, axis=0)
+    return [ch.points, np.r_[P, P[:1]]]
+
+
 def _face_frame(V, F, c, n_sym, err, tip, refine, n_samples, cen, area):
     """The Frame whose nose tip is ``tip`` (3,) on the profile of the plane (c, n_sym); cen
     (f,3), area (f,): the triangles' centroids and areas."""
@@ -234,10 +245,11 @@ def find_frames(V, F, n_samples=1500, refine=True, candidates=NOSE_CANDIDATES):
     found = {}
     for ch in chains:
         if len(ch.points) > 4:
-            for centre in (c, ch.points.mean(0)):
-                for i, a in _nose_scores(ch.points, centre):
-                    key = tuple(np.round(ch.points[i], 6))
-                    found[key] = min(a, found.get(key, np.inf))
+            for P in _walks(ch):
+                for centre in (c, ch.points.mean(0)):
+                    for i, a in _nose_scores(P, centre):
+                        key = tuple(np.round(P[i], 6))
+                        found[key] = min(a, found.get(key, np.inf))
     cands = sorted(((np.array(k), a) for k, a in found.items()), key=lambda t: t[1])
     if not cands:
         raise MeshError("no nose found on the profile curve: the mesh does not look like a face")

@@ -106,6 +106,9 @@ def settle_unit(target, template, unit=None, progress=None):
     if not tried:
         raise MeshError(f"{target.name}: no face found at any scale tried ({', '.join(g for g, _ in errors)}); "
                         f"at the first: {errors[0][1]}")
+    # a guess whose face never settled to the template's size (MAX_PASSES) aligned something
+    # else than the face: the settled ones are chosen from first
+    tried = [r for r in tried if abs(np.log(r[2][1])) < np.log(SCALE_SETTLED)] or tried
     guess, t, m = tried[best_pose([r[2][0].residual for r in tried], [r[2][0].uncovered for r in tried])[0]]
     per_unit = t.scale
     unit = next((u for u, s in UNITS.items() if abs(np.log(per_unit / s)) < np.log(UNIT_TOLERANCE)), "none")
