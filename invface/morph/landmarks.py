@@ -425,12 +425,11 @@ class _ProfileSearch:
         P, idx, L, tip = self.P, self.idx, self.L, self.tip
         y, z = P[:, 1], P[:, 2]
         my = 0.5 * (L["mouth_corner_L"][1] + L["mouth_corner_R"][1])
-        mouth = (idx < tip) & (idx > chin) & (np.abs(y - my) < 0.006)
-        if mouth.any():
-            # each candidate's depth is the frontmost profile point at its height, so an open
-            # mouth's inner lips do not count
-            front = _front_depth(P[chin:tip + 1], y[mouth])
-            cand = idx[mouth]
+        # the candidates on the outline: an open mouth's inner lips and cavity, at the same
+        # heights, do not count
+        cand = _on_outline(P, idx[(idx < tip) & (idx > chin) & (np.abs(y - my) < 0.006)])
+        if len(cand):
+            front = _front_depth(P[chin:tip + 1], y[cand])
             up = np.argsort(y[cand])                   # bottom to top
             notches, _ = find_peaks(-front[up], prominence=NOTCH_PROMINENCE)
             stom = cand[up[notches[-1]]] if len(notches) else cand[np.argmin(front)]
