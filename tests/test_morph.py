@@ -717,20 +717,27 @@ def test_real_scan_difficulties_build(kind, small_expressive_model):
     assert max(err.values()) < 3.0, err
 
 
-def test_a_unitless_bust_turned_anywhere_is_found_at_its_scale(small_model):
-    """Lee Perry-Smith's bust (no physical unit), turned by a random rotation: the first scale
-    guess aligned its face 3.9 mm from the template's at 1.5 times the right scale (3.4 mm at
-    the right one), under the 5 mm that ended the search, and every landmark was 5-18 cm off
-    (bench/scan_variants.py). Every guess is now tried and the closest face wins."""
+def _real_scan_turned(name):
+    """(vertices (n,3) turned by bench/scan_variants.py's rotation, faces, the rotation (3,3))
+    of the real scan ``name``; the test is skipped where the scans are not available."""
     from conftest import SHARED
     from invface.io.meshes import read_mesh
-    path = SHARED / "data" / "real" / "scans" / "lee_perry_smith.obj"
+    path = SHARED / "data" / "real" / "scans" / f"{name}.obj"
     if not path.exists():
         pytest.skip("the real scans (../shared/data/real/scans) are not available")
     V, F = read_mesh(path)[:2]
     R = np.linalg.qr(np.random.default_rng([0, 2]).normal(size=(3, 3)))[0]
     R *= np.sign(np.linalg.det(R))
-    scale = orient_target(clean(V @ R.T, F, name="lee"), small_model)[0].scale
+    return np.asarray(V, float) @ R.T, F, R
+
+
+def test_a_unitless_bust_turned_anywhere_is_found_at_its_scale(small_model):
+    """Lee Perry-Smith's bust (no physical unit), turned by a random rotation: the first scale
+    guess aligned its face 3.9 mm from the template's at 1.5 times the right scale (3.4 mm at
+    the right one), under the 5 mm that ended the search, and every landmark was 5-18 cm off
+    (bench/scan_variants.py). Every guess is now tried and the closest face wins."""
+    V, F, _ = _real_scan_turned("lee_perry_smith")
+    scale = orient_target(clean(V, F, name="lee"), small_model)[0].scale
     assert abs(np.log(scale / 0.047)) < np.log(1.1), scale      # unturned: 46-49 mm per file unit
 
 
@@ -774,18 +781,10 @@ def test_the_nose_tip_candidates_do_not_depend_on_how_the_scan_is_turned():
     loop's walk started at the nose tip, whose wedge was then cut by the walk's end, and no
     candidate came within 64 mm of the nose (every landmark 30-240 mm off). Closed loops are
     now also walked from half-way round (orient._walks)."""
-    from conftest import SHARED
-    from invface.io.meshes import read_mesh
     from invface.morph.orient import find_frames
-    path = SHARED / "data" / "real" / "scans" / "nefertiti.obj"
-    if not path.exists():
-        pytest.skip("the real scans (../shared/data/real/scans) are not available")
-    V, F = read_mesh(path)[:2]
-    V = np.asarray(V, float)
-    R = np.linalg.qr(np.random.default_rng([0, 2]).normal(size=(3, 3)))[0]
-    R *= np.sign(np.linalg.det(R))
+    turned, F, R = _real_scan_turned("nefertiti")
     tips = []
-    for Y in (V, V @ R.T):
+    for Y in (turned @ R, turned):
         t = clean(Y, F, name="nefertiti", unit="mm")
         tips.append(np.array([fr.nose_tip for fr in find_frames(t.vertices, t.faces, refine=False)]))
     back = tips[1] @ R                                             # the turned candidates, unturned
@@ -820,16 +819,8 @@ def test_the_stomion_of_an_open_mouth_is_on_the_lips_not_in_the_mouth(default_mo
     lips' heights. Turned by bench/scan_variants.py's rotation (at the scale its unitless search
     finds, 46.01 mm per unit), the stomion was taken from the cavity, 8 cm behind the lips, and
     the subnasale fell back. The stomion's candidates are now those on the face's outline."""
-    from conftest import SHARED
-    from invface.io.meshes import read_mesh
-    path = SHARED / "data" / "real" / "scans" / "lee_perry_smith.obj"
-    if not path.exists():
-        pytest.skip("the real scans (../shared/data/real/scans) are not available")
-    V, F = read_mesh(path)[:2]
-    R = np.linalg.qr(np.random.default_rng([0, 2]).normal(size=(3, 3)))[0]
-    R *= np.sign(np.linalg.det(R))
-    target, al, _, _ = orient_target(clean(np.asarray(V, float) @ R.T * 0.04601, F, name="lee", unit="m"),
-                                     default_model, "m")
+    V, F, _ = _real_scan_turned("lee_perry_smith")
+    target, al, _, _ = orient_target(clean(V * 0.04601, F, name="lee", unit="m"), default_model, "m")
     L, _, fell = find_landmarks(al.apply(target.vertices), target.faces, default_model)
     assert "stomion" not in fell and "subnasale" not in fell, fell
     assert L["stomion"][2] > L["nose_tip"][2] - 0.025, L["stomion"]          # on the lips, 1-2 cm behind the tip
