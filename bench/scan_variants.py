@@ -37,6 +37,7 @@ from invface.io.meshes import read_mesh
 from invface.mesh.closest import closest_points
 from invface.morph.build import orient_target
 from invface.morph.landmarks import LANDMARKS, find_landmarks
+from invface.morph.synthetic import torso
 from invface.morph.target import clean
 
 SCANS = SHARED / "real" / "scans"
@@ -97,11 +98,9 @@ def variant(kind, V, F, truth, metres, to_model, to_file, rng):
         keep = to_model(V[F].mean(1))[:, 1] > lip[1] - 0.003
         return V, F[keep], truth
     if kind == "shoulders":              # a torso (an ellipsoid 46 x 26 x 30 cm) whose top meets the neck
-        import trimesh
         M = to_model(V)
-        s = trimesh.creation.icosphere(4, radius=1.0)
-        B = np.asarray(s.vertices) * [0.23, 0.13, 0.15] + M[np.argmin(M[:, 1])] - [0, 0.135, 0.04]
-        return np.concatenate([V, to_file(B)]), np.concatenate([F, np.asarray(s.faces) + len(V)]), truth
+        B, G = torso(M[np.argmin(M[:, 1])])
+        return np.concatenate([V, to_file(B)]), np.concatenate([F, G + len(V)]), truth
     raise ValueError(kind)
 
 

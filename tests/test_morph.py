@@ -8,13 +8,13 @@ from scipy.spatial import cKDTree
 
 from invface.errors import MeshError
 from invface.mesh.closest import closest_points
-from invface.mesh.triangles import vertex_normals
+from invface.mesh.triangles import triangle_areas, vertex_normals
 from invface.morph.blendshapes import read_blendshapes, recognised
 from invface.morph.build import build_model, inside_fraction, orient_target
 from invface.morph.curvature import stencil_curvature
 from invface.morph.landmarks import find_landmarks, template_landmarks
 from invface.morph.openings import OPENINGS, inner_surfaces, opening_centres, ordered_loops, split_loop
-from invface.morph.synthetic import front_part, onto_part, random_identity, random_pose
+from invface.morph.synthetic import front_part, onto_part, random_identity, random_pose, torso
 from invface.morph.target import clean
 
 # sharp features must be found within 3 mm, the softer ones (corners of slits that the
@@ -632,10 +632,8 @@ def test_imported_jaw_shape_drives_the_simulation(small_expressive_model, tmp_pa
 def _with_torso(Y, F, unit):
     """A bust: the head (Y (n,3) file units, F) over a separate torso larger than the head
     (an ellipsoid 46 x 26 x 30 cm whose top meets the neck), in the same file units."""
-    neck = Y[np.argmin(Y[:, 1])]
-    s = trimesh.creation.icosphere(4, radius=1.0)
-    T = s.vertices * np.array([0.23, 0.13, 0.15]) / unit + neck - np.array([0, 0.135, 0.04]) / unit
-    return np.concatenate([Y, T]), np.concatenate([F, s.faces + len(Y)])
+    T, G = torso(Y[np.argmin(Y[:, 1])] * unit)
+    return np.concatenate([Y, T / unit]), np.concatenate([F, G + len(Y)])
 
 
 def _difficult_scan(tpl, kind):
@@ -748,15 +746,11 @@ def test_a_face_beside_a_torso_many_times_its_area_is_kept_and_aligned(small_mod
     face lands on it."""
     tpl = small_model
     X = random_identity(tpl.neutral, 5, amplitude=0.003)
-    F = tpl.triangles
-    F = F[X[F].mean(1)[:, 2] > X[tpl.landmarks["nose_tip"], 2] - 0.07]
-    used, inv = np.unique(F, return_inverse=True)
-    X, F = X[used], inv.reshape(-1, 3)
-    s = trimesh.creation.icosphere(4, radius=1.0)
-    T = s.vertices * np.array([0.37, 0.21, 0.24]) + X[np.argmin(X[:, 1])] - np.array([0, 0.22, 0.06])
-    Y, G = np.concatenate([X, T]), np.concatenate([F, s.faces + len(X)])
-    area = lambda V, F: np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum() / 2
-    assert area(X, F) < 0.1 * area(T, s.faces)
+    used, F = front_part(X, tpl.triangles, X[tpl.landmarks["nose_tip"], 2] - 0.07)
+    X = X[used]
+    T, G = torso(X[np.argmin(X[:, 1])], radii=(0.37, 0.21, 0.24), below=(0.22, 0.06))
+    assert triangle_areas(X, F).sum() < 0.1 * triangle_areas(T, G).sum()
+    Y, G = np.concatenate([X, T]), np.concatenate([F, G + len(X)])
     target, al, _, _ = orient_target(clean(Y * 1000, G, name="face_and_torso", unit="mm"), tpl, "mm")
     nose = np.flatnonzero(used == tpl.landmarks["nose_tip"])[0]
     assert np.linalg.norm(al.apply(X[nose]) - tpl.neutral[tpl.landmarks["nose_tip"]]) < 0.005

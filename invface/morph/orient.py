@@ -278,7 +278,7 @@ class Alignment:
     residual: float
     frame: Frame
     flipped_residual: float
-    uncovered: float = 0.0
+    uncovered: float
 
     def apply(self, P):
         return np.asarray(P) @ self.R.T + self.t

@@ -1,5 +1,6 @@
 """Synthetic actors for tests and benchmarks: the template skin under a smooth random
-deformation (identity change) and a random similarity transform (pose and unit)."""
+deformation (identity change) and a random similarity transform (pose and unit), a front part
+of it, and a torso to put under a scan."""
 from __future__ import annotations
 
 import numpy as np
@@ -46,3 +47,13 @@ def onto_part(X, ids, Q):
     a whole head carried into the frame where only its scanned part is known."""
     R, t = kabsch(X[ids], Q)
     return X @ R.T + t
+
+
+def torso(top, radii=(0.23, 0.13, 0.15), below=(0.135, 0.04)):
+    """A closed ellipsoid torso (vertices (n,3) m, faces (t,3)): semi-axes ``radii`` (m: width,
+    height, depth), its centre ``below`` (m: down, back) from ``top`` (3,), a head's lowest
+    point; the defaults give a torso 46 x 26 x 30 cm whose top meets the neck."""
+    import trimesh
+    s = trimesh.creation.icosphere(4, radius=1.0)
+    V = np.asarray(s.vertices) * np.asarray(radii) + np.asarray(top, float) - np.array([0.0, below[0], below[1]])
+    return V, np.asarray(s.faces)
